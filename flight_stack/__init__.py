@@ -1,0 +1,11 @@
+"""The entry script's backends: the only code that knows all three ROS packages."""
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE_DIRS = [ROOT / 'ros2_ws' / 'src' / name for name in ('quad_msgs_bridge', 'quad_sim', 'nnit2fsmc_controller')]
+
+# From a fresh clone the three package folders are importable without installing them.
+for _package_dir in PACKAGE_DIRS:
+    if str(_package_dir) not in sys.path:
+        sys.path.append(str(_package_dir))

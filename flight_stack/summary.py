@@ -1,0 +1,67 @@
+"""The flight summary: ``summary.json`` and the table printed at the end of a run."""
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+from quad_msgs_bridge.metrics import FlightRecord, flight_metrics
+from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
+
+
+def build_summary(record: FlightRecord, *, backend: str, controller: str, scenario: str, seed: int,
+                  settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
+                  physics_rate: float, wall_time_s: float, max_error: float) -> dict:
+    """Metrics of the flight plus everything needed to reproduce it."""
+    metrics = flight_metrics(record, settle_time, params.F_min, params.F_max)
+    sim_time = metrics['duration_s']
+    failures = []
+    if not metrics['all_finite']:
+        failures.append('non-finite state or rotor force')
+    if metrics['max_position_error_m'] > max_error:
+        failures.append(f'max position error {metrics["max_position_error_m"]:.3f} m exceeds {max_error} m')
+    return {
+        **metrics,
+        'flight_ok': not failures,
+        'failures': failures,
+        'backend': backend,
+        'controller': controller,
+        'scenario': scenario,
+        'seed': seed,
+        'physics_rate_hz': physics_rate,
+        'wall_time_s': wall_time_s,
+        'real_time_factor': sim_time / wall_time_s if wall_time_s > 0 else None,
+        'vehicle': dataclasses.asdict(params),
+        'disturbances': dataclasses.asdict(disturbances),
+        'gains': gains,
+    }
+
+
+def write_summary(summary: dict, out_dir: Path) -> Path:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / 'summary.json'
+    path.write_text(json.dumps(summary, indent=2) + '\n')
+    return path
+
+
+def format_summary(summary: dict) -> str:
+    """A short human-readable table of the main figures."""
+    chattering = '  '.join(f'{name} {value:.3g}' for name, value in summary['chattering'].items())
+    shares = summary['fuzzy_share']
+    share_line = '  '.join(f'{axis} {values[0]:.2f}->{values[-1]:.2f}' for axis, values in shares.items() if values)
+    rtf = summary.get('real_time_factor')
+    lines = [
+        f'flight: {summary["controller"]} on "{summary["scenario"]}" ({summary["backend"]} backend), '
+        f'{summary["duration_s"]:.1f} s sim in {summary["wall_time_s"]:.1f} s wall'
+        + (f' (real-time factor {rtf:.1f})' if rtf else ''),
+        f'  after settling ({summary["settle_time_s"]:.1f} s):',
+        f'    position RMSE     {summary["rmse_position_m"] * 100:8.3f} cm',
+        f'    max position err  {summary["max_position_error_m"] * 100:8.3f} cm',
+        f'    yaw RMSE          {summary["rmse_yaw_rad"]:8.5f} rad',
+        f'    chattering [1/s]  {chattering}',
+        f'    rotor saturation  {summary["saturation_fraction"] * 100:.2f} % of steps '
+        f'({summary["saturation_fraction_whole_flight"] * 100:.2f} % over the whole flight)',
+        f'  corrective share (first -> last {summary["fuzzy_share_window_s"]:.0f} s window): {share_line}',
+        '  result: ' + ('OK' if summary['flight_ok'] else 'FAILED: ' + '; '.join(summary['failures'])),
+    ]
+    return '\n'.join(lines)

@@ -1,0 +1,96 @@
+"""Per-subsystem control laws, one instance for each of x, y, z, phi, theta, psi.
+
+Every law answers ``update(e, de, ref_vel, ref_acc, drift, gain)`` where, for the subsystem's
+second-order dynamics  q'' = drift + gain * v  (drift and gain from the nominal model, see
+:mod:`nnit2fsmc_controller.controller`), e = q - q_d, de = q' - q_d', ref_vel = q_d',
+ref_acc = q_d'' and v is the virtual control the law returns. All laws use the paper's sliding surface S = de + lambda e (eq. 3, 11).
+
+* :class:`NNIT2FSMCLaw`: the paper's controller. Model-free: it ignores drift and gain;
+  v = U_eq_hat (neural network) + U_fuzzy (IT2 fuzzy corrective term), the network learning online.
+* :class:`SlidingModeLaw`: classic SMC, v = (ref_acc - lambda de - drift - K sw(S)) / gain, with
+  sw = sign (``boundary_layer`` = 0) or sat(S / boundary_layer).
+* :class:`PIDLaw`: v = (ref_acc - kp e - ki int(e) - kd de - drift) / gain, anti-windup by clamping.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from quad_msgs_bridge.vehicle_params import check_number
+
+from .it2_fuzzy import IT2FuzzyCorrector
+from .neural_network import EquivalentControlNetwork
+
+
+class AxisOutput(NamedTuple):
+    """What one subsystem law computed in one update (units of its virtual control)."""
+
+    value: float        #: v = equivalent + corrective
+    surface: float      #: sliding surface S = de + lambda e (the PID reports the same S)
+    equivalent: float   #: NN estimate (NNIT2FSMC) or model equivalent control (SMC) or PID feedback term
+    corrective: float   #: fuzzy term (NNIT2FSMC), switching term (SMC) or 0 (PID)
+
+
+class NNIT2FSMCLaw:
+    """One NNIT2FSMC subsystem: S = de + lambda e, v = NN(Z) + IT2FLS(S), NN learns from the fuzzy term.
+
+    Network inputs Z = (q_d', q_d'', 1). On the sliding surface (S = 0, so e and de vanish) the
+    equivalent control is a function of the reference motion and of slowly varying terms
+    (gravity, drag, the section IV bias disturbances): the reference velocity and acceleration
+    and a constant input are what it depends on. Tracking errors are deliberately not inputs:
+    with e and de as inputs, online learning also adapts a feedback gain (the MIT-rule
+    mechanism) and was seen to drive the position loop into a limit cycle at learning rates
+    that are otherwise useful; the fuzzy term alone provides the feedback.
+    """
+
+    def __init__(self, lam: float, fuzzy: IT2FuzzyCorrector, network: EquivalentControlNetwork):
+        self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
+        self.fuzzy = fuzzy
+        self.network = network
+
+    def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
+        surface = de + self.lam * e
+        corrective = self.fuzzy(surface)
+        equivalent = self.network.forward((ref_vel, ref_acc, 1.0))
+        self.network.learn(corrective)
+        return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
+
+
+class SlidingModeLaw:
+    """Classic SMC with the nominal model's equivalent control and a sign or saturated switching term."""
+
+    def __init__(self, lam: float, switching_gain: float, boundary_layer: float = 0.0):
+        self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
+        self.switching_gain = check_number('switching_gain', switching_gain, 0.0)
+        self.boundary_layer = check_number('boundary_layer', boundary_layer, 0.0)
+
+    def switching(self, surface: float) -> float:
+        """sign(S), or sat(S / boundary_layer) when a boundary layer is set."""
+        if self.boundary_layer > 0.0:
+            return max(-1.0, min(1.0, surface / self.boundary_layer))
+        return (surface > 0.0) - (surface < 0.0)
+
+    def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
+        surface = de + self.lam * e
+        equivalent = (ref_acc - self.lam * de - drift) / gain
+        corrective = -self.switching_gain * self.switching(surface) / gain
+        return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
+
+
+class PIDLaw:
+    """PID on the error with feed-forward of the reference and of the nominal drift."""
+
+    def __init__(self, lam: float, kp: float, ki: float, kd: float, integral_limit: float, dt: float):
+        self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
+        self.kp = check_number('kp', kp, 0.0)
+        self.ki = check_number('ki', ki, 0.0)
+        self.kd = check_number('kd', kd, 0.0)
+        self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
+        self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
+        self.integral = 0.0
+
+    def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
+        limit = self.integral_limit
+        self.integral = max(-limit, min(limit, self.integral + e * self.dt))
+        feedback = -(self.kp * e + self.ki * self.integral + self.kd * de)
+        value = (ref_acc + feedback - drift) / gain
+        return AxisOutput(value, de + self.lam * e, value, 0.0)

@@ -1,0 +1,26 @@
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'quad_msgs_bridge'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    package_data={package_name: ['config/*.yaml']},
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob(package_name + '/config/*.yaml')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='NNIT2FSMC flight stack maintainers',
+    maintainer_email='maintainers@nnit2fsmc.invalid',
+    description="The NNIT2FSMC stack's contract: topic names, QoS, frames, message and numpy conversions, the vehicle description, MCAP bag writing, reading and review.",
+    license='Apache-2.0',
+    extras_require={'test': ['pytest']},
+    entry_points={'console_scripts': [
+    ]},
+)
