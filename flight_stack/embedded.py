@@ -11,7 +11,9 @@ import sys
 import time
 from dataclasses import dataclass
 
+from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
 from quad_msgs_bridge.metrics import FlightRecord, FlightRecorder
+from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.model import QuadrotorModel
@@ -26,10 +28,18 @@ class FlightResult:
     steps: int
 
 
+def setpoint_path(trajectory, setpoint_rate: float) -> SetpointPath:
+    """The setpoints the trajectory node would publish, as the controller reads them back from the message."""
+    path = SetpointPath.sampled(trajectory, 0.0, trajectory.duration, setpoint_rate)
+    return setpoints_from_msg(setpoints_msg(rosbags_kit(), path))
+
+
 def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, disturbances: Disturbances,
-                 gains: dict, duration: float, physics_rate: float, progress: bool = False) -> FlightResult:
+                 gains: dict, duration: float, physics_rate: float, setpoint_rate: float = 50.0,
+                 progress: bool = False) -> FlightResult:
     """Fly ``trajectory`` for ``duration`` [s] of sim time; one record row per control step."""
     controller = build_controller(controller_kind, params, gains)
+    setpoints = setpoint_path(trajectory, setpoint_rate)
     physics_dt = 1.0 / physics_rate
     substeps = round(controller.dt / physics_dt)
     if substeps < 1 or abs(substeps * physics_dt - controller.dt) > 1e-12:
@@ -44,7 +54,7 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
         odometry = simulator.odometry()
         t = odometry.stamp
         state = state_from_odometry(odometry)
-        reference = trajectory.sample(t)
+        reference = setpoints.sample(t)
         out = controller.update(t, state, reference)
         simulator.set_forces(out.forces)
         axes = out.axes.values()

@@ -35,11 +35,11 @@ import math
 from typing import NamedTuple, Sequence
 
 from quad_msgs_bridge.frames import wrap_angle
+from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.mixer import controls_from_forces, forces_from_controls, saturate_forces
 from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
 
 from .axis_laws import AxisOutput
-from .trajectory import ReferenceSample
 
 AXES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
 

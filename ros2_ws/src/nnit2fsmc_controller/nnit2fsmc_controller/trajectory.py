@@ -8,27 +8,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple, Sequence
 
+from quad_msgs_bridge.reference import ReferenceSample, hold
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 Vec3 = tuple[float, float, float]
-
-
-class ReferenceSample(NamedTuple):
-    """Reference for one instant."""
-
-    position: Vec3           #: [m, world ENU]
-    velocity: Vec3           #: [m/s, world ENU]
-    acceleration: Vec3       #: [m/s^2, world ENU]
-    yaw: float               #: [rad]
-    yaw_rate: float = 0.0    #: [rad/s]
-    yaw_acceleration: float = 0.0  #: [rad/s^2]
-
-
-def hold(position: Sequence[float], yaw: float = 0.0) -> ReferenceSample:
-    """A reference that holds ``position`` [m, world ENU] at heading ``yaw`` [rad]."""
-    return ReferenceSample(tuple(float(v) for v in position), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), float(yaw))
 
 
 def _rest_state_below(sample: ReferenceSample) -> list[float]:
@@ -53,8 +37,8 @@ class Helix:
     duration: float = 60.0     #: [s]
 
     def sample(self, t: float) -> ReferenceSample:
+        moving = 1.0 if t <= self.duration else 0.0
         t = min(max(t, 0.0), self.duration)
-        moving = 1.0 if t < self.duration else 0.0
         r, w = self.radius, self.angular_rate
         c, s = math.cos(w * t), math.sin(w * t)
         return ReferenceSample(

@@ -5,7 +5,8 @@ import math
 from typing import Sequence
 
 from quad_msgs_bridge.state import OdometrySample, odometry_from_state
-from quad_msgs_bridge.vehicle_params import check_number
+from quad_msgs_bridge.timebase import nanoseconds, seconds
+from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 from .model import QuadrotorModel, check_state
 
@@ -13,21 +14,31 @@ from .model import QuadrotorModel, check_state
 class Simulator:
     """Steps :class:`QuadrotorModel` with a fixed physics step, holding the last accepted thrusts.
 
-    Sim time is ``steps * physics_dt`` (no accumulated rounding). Thrusts start at zero: the
-    vehicle sits on the ground until a controller answers.
+    Sim time is kept in integer nanoseconds (``steps * physics_dt_ns``), the resolution of a ROS
+    stamp, so the time in a message and the time in the core are the same number. Thrusts start
+    at zero: the vehicle sits on the ground until a controller answers.
     """
 
     def __init__(self, model: QuadrotorModel, physics_dt: float, initial_state: Sequence[float]):
         self.model = model
-        self.physics_dt = check_number('physics_dt', physics_dt, 0.0, 0.1, low_inclusive=False)
+        check_number('physics_dt', physics_dt, 0.0, 0.1, low_inclusive=False)
+        self.physics_dt_ns = nanoseconds(physics_dt)
+        if self.physics_dt_ns < 1:
+            raise ParameterError(f'physics_dt: {physics_dt} s is below one nanosecond')
+        self.physics_dt = seconds(self.physics_dt_ns)
         self.state = check_state(initial_state)
         self.steps = 0
         self.forces: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
 
     @property
+    def time_ns(self) -> int:
+        """Sim time [ns]."""
+        return self.steps * self.physics_dt_ns
+
+    @property
     def time(self) -> float:
         """Sim time [s]."""
-        return self.steps * self.physics_dt
+        return seconds(self.time_ns)
 
     def set_forces(self, forces: Sequence[float]) -> bool:
         """Fly with rotor thrusts F1..F4 [N] from now on; refuse (keep the last) unless 4 finite values."""
@@ -40,7 +51,7 @@ class Simulator:
         """Integrate ``steps`` physics steps with the current thrusts."""
         step, dt = self.model.step, self.physics_dt
         for _ in range(steps):
-            self.state = step(self.steps * dt, self.state, self.forces, dt)
+            self.state = step(self.time, self.state, self.forces, dt)
             self.steps += 1
 
     def odometry(self) -> OdometrySample:
