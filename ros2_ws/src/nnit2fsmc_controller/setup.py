@@ -22,5 +22,7 @@ setup(
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={'console_scripts': [
+        'nnit2fsmc_controller = nnit2fsmc_controller.controller_node:main',
+        'trajectory = nnit2fsmc_controller.trajectory_node:main',
     ]},
 )

@@ -29,6 +29,24 @@ def load_gains(path: str | Path | None = None) -> dict:
         raise ParameterError(f'controller file {path}: not valid YAML ({error})') from error
     if not isinstance(gains, dict):
         raise ParameterError(f'controller file {path}: expected a mapping')
+    return ros_parameters(gains)
+
+
+NODE_PARAMETERS = ('controller', 'vehicle_file', 'gains_file', 'goal_speed', 'odom_timeout')
+
+
+def ros_parameters(document: dict) -> dict:
+    """The gains of a ROS 2 parameter file (``<node>: ros__parameters: ...``), node-level parameters removed.
+
+    A plain gains mapping (no ``ros__parameters``) is returned unchanged.
+    """
+    sections = [value['ros__parameters'] for value in document.values()
+                if isinstance(value, dict) and 'ros__parameters' in value]
+    if not sections:
+        return document
+    gains: dict = {}
+    for section in sections:
+        gains.update({k: v for k, v in section.items() if k not in NODE_PARAMETERS})
     return gains
 
 
@@ -97,3 +115,58 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
         kind, params, laws, dt,
         max_tilt=_positive(gains, 'common.max_tilt'),
         angle_filter_tau=_positive(gains, 'common.angle_filter_tau'))
+
+
+def flatten_gains(gains: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """The gains tree as {'nnit2fsmc.axes.x.fuzzy_gain': 3.0, ...} (ROS parameter names)."""
+    flat = {}
+    for key, value in gains.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(flatten_gains(value, name + '.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+def unflatten_gains(flat: Mapping[str, Any]) -> dict:
+    """Inverse of :func:`flatten_gains`."""
+    tree: dict = {}
+    for name, value in flat.items():
+        node = tree
+        *parents, leaf = name.split('.')
+        for key in parents:
+            node = node.setdefault(key, {})
+        node[leaf] = value
+    return tree
+
+
+#: what each gain means, by the last non-axis component of its name
+GAIN_DESCRIPTIONS = {
+    'control_rate': 'controller update rate [Hz] (equals the simulator odometry rate)',
+    'max_tilt': 'largest roll/pitch the position loop may ask for [rad]',
+    'angle_filter_tau': 'time constant of the desired-angle differentiation filter [s]',
+    'lambda': 'sliding-surface slope lambda of S = de + lambda e [1/s]',
+    'type_reducer': 'IT2 type reduction: km (exact Karnik-Mendel) or nie-tan',
+    'lower_height': 'height of the lower membership functions, in (0, 1]',
+    'lower_half_width': 'half-width of the lower membership functions, in (0, 0.5] (label spacing 0.5)',
+    'hidden_units': 'hidden neurons of each subsystem network',
+    'weight_limit': 'every NN weight is kept within +-this',
+    'seed': 'seed of the initial hidden weights',
+    'input_scale': 'sliding-surface value that saturates the fuzzy input [units of S]',
+    'fuzzy_gain': 'IT2 fuzzy corrective output gain [units of the subsystem control]',
+    'nn_gain': 'NN output gain K_eq [units of the subsystem control]',
+    'learning_rate': 'NN learning rate alpha of eqs. (6)-(7), per update',
+    'boundary_layer': 'smc-sat boundary-layer width [units of S]',
+    'switching_gain': 'SMC switching gain [units of the second derivative of the subsystem]',
+    'kp': 'PID proportional gain', 'ki': 'PID integral gain', 'kd': 'PID derivative gain',
+    'integral_limit': 'PID integral clamp [units of e * s]',
+}
+
+
+def gain_description(name: str) -> str:
+    """Human description of a flattened gain name such as 'nnit2fsmc.axes.x.fuzzy_gain'."""
+    parts = name.split('.')
+    axis = next((p for p in parts if p in AXES), None)
+    meaning = next(GAIN_DESCRIPTIONS[p] for p in reversed(parts) if p in GAIN_DESCRIPTIONS)
+    return f'{meaning}, {axis} subsystem' if axis else meaning

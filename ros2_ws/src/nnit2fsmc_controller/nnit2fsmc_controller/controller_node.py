@@ -1,0 +1,168 @@
+"""nnit2fsmc_controller node: answers every odometry with rotor forces from the NNIT2FSMC (or a baseline).
+
+Each odometry at sim time t is answered once, with the reference for that same instant t taken
+from the ``setpoints`` path (or from the transfer to the last ``goal_pose``). Per answer it
+publishes ``rotor_forces`` first (the simulator can go on integrating), then ``control/wrench``,
+``control/reference`` and ``control/diagnostics``, all stamped t.
+
+Failure behaviour: odometry that arrives before any setpoint is held and answered when the first
+setpoints arrive; a repeated odometry (same or older stamp) is ignored; non-finite odometry or
+setpoints are rejected with a throttled error, and the last valid forces (hover thrust if none)
+are published instead, so a non-finite force is never published.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+
+from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
+                                       ROTOR_FORCES, SETPOINTS)
+from quad_msgs_bridge.conversions import (MessageKit, diagnostics_msg, goal_from_msg, odometry_from_msg,
+                                          pose_stamped_msg, rotor_forces_msg, setpoints_from_msg, wrench_msg)
+from quad_msgs_bridge.frames import wrap_angle
+from quad_msgs_bridge.reference import SetpointPath
+from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
+from quad_msgs_bridge.state import PSI, state_from_odometry
+from quad_msgs_bridge.timebase import nanoseconds
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+
+from .factory import CONTROLLERS, build_controller, flatten_gains, gain_description, load_gains, unflatten_gains
+from .trajectory import Waypoints
+
+_UNBOUNDED = (0.0, math.inf)
+
+
+class ControllerNode(Node):
+    def __init__(self, kit: MessageKit):
+        super().__init__('nnit2fsmc_controller')
+        self.kit = kit
+        kind = declare(self, 'controller', 'nnit2fsmc', 'control law', choices=CONTROLLERS)
+        vehicle_file = declare(self, 'vehicle_file', '', 'vehicle YAML (nominal model); empty: the packaged one')
+        gains_file = declare(self, 'gains_file', '', 'gains YAML used as defaults; empty: the packaged one')
+        self.goal_speed = declare(self, 'goal_speed', 0.5, 'mean speed of the transfer to a goal_pose [m/s]',
+                                  (0.01, 10.0))
+        self.odom_timeout = declare(self, 'odom_timeout', 0.5, 'wall seconds without odometry before warning',
+                                    (0.001, 60.0))
+        self.params, _ = load_vehicle_file(vehicle_file or None)
+        gains = {}
+        for name, default in flatten_gains(load_gains(gains_file or None)).items():
+            if isinstance(default, str):
+                gains[name] = declare(self, name, default, gain_description(name), choices=('km', 'nie-tan'))
+            else:
+                gains[name] = declare(self, name, default, gain_description(name),
+                                      (0, 2 ** 31 - 1) if isinstance(default, int) else _UNBOUNDED)
+        try:
+            self.controller = build_controller(kind, self.params, unflatten_gains(gains))
+        except (ParameterError, ValueError) as error:
+            raise ParameterError(f'controller gains: {error}') from error
+        self.forces_pub = publisher(self, kit, ROTOR_FORCES)
+        self.wrench_pub = publisher(self, kit, CONTROL_WRENCH)
+        self.reference_pub = publisher(self, kit, CONTROL_REFERENCE)
+        self.diagnostics_pub = publisher(self, kit, CONTROL_DIAGNOSTICS)
+        subscription(self, kit, ODOM, self.on_odometry)
+        subscription(self, kit, SETPOINTS, self.on_setpoints)
+        subscription(self, kit, GOAL_POSE, self.on_goal)
+        self.path: SetpointPath | None = None
+        self.pending = None
+        self.last_answered_ns = -1
+        self.last_forces = (self.params.hover_force,) * 4
+        self.last_position = None
+        self.last_odom_wall: float | None = None
+        self.odom_stale = False
+        # a wall-clock timer: under use_sim_time a stalled simulation would also stall a sim-time timer
+        self.create_timer(self.odom_timeout, self.check_odometry_age, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self.get_logger().info(f'{kind} controller ready at {1.0 / self.controller.dt:g} Hz')
+
+    def publish_forces(self, forces) -> None:
+        self.forces_pub.publish(rotor_forces_msg(self.kit, forces))
+
+    def on_odometry(self, msg) -> None:
+        self.last_odom_wall = time.monotonic()
+        self.odom_stale = False
+        try:
+            sample = odometry_from_msg(msg)
+            state = state_from_odometry(sample)
+        except ValueError as error:
+            self.get_logger().error(f'rejected odometry: {error}; holding the last forces', throttle_duration_sec=1.0)
+            self.publish_forces(self.last_forces)
+            return
+        stamp_ns = nanoseconds(sample.stamp)
+        if stamp_ns <= self.last_answered_ns:
+            return
+        if self.path is None:
+            if self.pending is None:
+                self.get_logger().info('odometry received; waiting for setpoints or a goal_pose before answering')
+            self.pending = (sample, state)
+            return
+        self.answer(sample, state)
+
+    def answer(self, sample, state) -> None:
+        t = sample.stamp
+        reference = self.path.sample(t)
+        try:
+            out = self.controller.update(t, state, reference)
+        except ValueError as error:
+            self.get_logger().error(f'controller refused its input: {error}; holding the last forces',
+                                    throttle_duration_sec=1.0)
+            self.publish_forces(self.last_forces)
+            return
+        self.last_answered_ns = nanoseconds(t)
+        self.last_forces = out.forces
+        self.last_position = (sample.position, state[PSI], t)
+        self.publish_forces(out.forces)
+        axes = out.axes.values()
+        self.wrench_pub.publish(wrench_msg(self.kit, t, out.controls, self.params.d))
+        self.reference_pub.publish(pose_stamped_msg(self.kit, t, reference.position, reference.yaw))
+        self.diagnostics_pub.publish(diagnostics_msg(
+            self.kit, [a.surface for a in axes], [a.equivalent for a in axes], [a.corrective for a in axes]))
+
+    def on_setpoints(self, msg) -> None:
+        try:
+            path = setpoints_from_msg(msg)
+        except ValueError as error:
+            self.get_logger().error(f'rejected setpoints: {error}', throttle_duration_sec=1.0)
+            return
+        self.path = path
+        self.get_logger().info(f'setpoints: {len(path.times)} points from t={path.start:.3f} s to {path.end:.3f} s')
+        self.answer_pending()
+
+    def on_goal(self, msg) -> None:
+        try:
+            goal = goal_from_msg(msg)
+        except ValueError as error:
+            self.get_logger().error(f'rejected goal_pose: {error}', throttle_duration_sec=1.0)
+            return
+        if self.last_position is None:
+            self.path = SetpointPath([0.0], [goal])
+        else:
+            position, yaw, t = self.last_position
+            distance = math.dist(position, goal.position)
+            span = max(2.0, distance / self.goal_speed)
+            goal_yaw = yaw + wrap_angle(goal.yaw - yaw)
+            transfer = Waypoints(((0.0, position, yaw), (span, goal.position, goal_yaw)))
+            self.path = SetpointPath.sampled(transfer, t, transfer.duration, 50.0)
+        self.get_logger().info(f'goal_pose: flying to {goal.position} at yaw {goal.yaw:.3f} rad and holding')
+        self.answer_pending()
+
+    def answer_pending(self) -> None:
+        if self.pending is not None:
+            pending, self.pending = self.pending, None
+            self.answer(*pending)
+
+    def check_odometry_age(self) -> None:
+        if self.last_odom_wall is None or self.odom_stale:
+            return
+        if time.monotonic() - self.last_odom_wall > self.odom_timeout:
+            self.odom_stale = True
+            self.get_logger().warning(f'no odometry for {self.odom_timeout:g} s')
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(ControllerNode, argv)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,45 @@
+"""trajectory node: publishes the chosen scenario as ``setpoints`` (for the controller) and ``reference_path``.
+
+Both are latched (transient local), so a controller or an RViz started later still gets them.
+The path starts at ``start_time`` [s] of the node clock (sim time under use_sim_time); -1 means now.
+"""
+from __future__ import annotations
+
+from rclpy.node import Node
+
+from quad_msgs_bridge.contract import REFERENCE_PATH, SETPOINTS
+from quad_msgs_bridge.conversions import MessageKit, path_msg, setpoints_msg
+from quad_msgs_bridge.reference import SetpointPath
+from quad_msgs_bridge.ros_helpers import declare, publisher, run_node
+from quad_msgs_bridge.timebase import seconds
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+from .trajectory import SCENARIOS, make_scenario
+
+
+class TrajectoryNode(Node):
+    def __init__(self, kit: MessageKit):
+        super().__init__('trajectory')
+        scenario = declare(self, 'scenario', 'paper', 'reference scenario', choices=tuple(SCENARIOS))
+        duration = declare(self, 'duration', 0.0, 'path length [s]; 0: the scenario default', (0.0, 1e6))
+        rate = declare(self, 'setpoint_rate', 50.0, 'points per second of the published path [Hz]', (0.1, 10000.0))
+        start = declare(self, 'start_time', -1.0, 'sim time the path starts at [s]; -1: now', (-1.0, 1e9))
+        try:
+            trajectory = make_scenario(scenario, duration or None)
+        except ParameterError as error:
+            raise ParameterError(f'parameter scenario/duration: {error}') from error
+        if start < 0.0:
+            start = seconds(self.get_clock().now().nanoseconds)
+        path = SetpointPath.sampled(trajectory, start, trajectory.duration, rate)
+        publisher(self, kit, SETPOINTS).publish(setpoints_msg(kit, path))
+        publisher(self, kit, REFERENCE_PATH).publish(path_msg(kit, path))
+        self.get_logger().info(f'{scenario}: {len(path.times)} setpoints from t={path.start:.3f} s '
+                               f'to {path.end:.3f} s published')
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(TrajectoryNode, argv)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

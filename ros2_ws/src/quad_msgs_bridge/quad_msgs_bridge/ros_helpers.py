@@ -1,0 +1,97 @@
+"""rclpy side of the contract, shared by the three nodes: QoS profiles, validated parameters, main().
+
+This is the bridge's only module that imports rclpy; the cores never import it.
+"""
+from __future__ import annotations
+
+import math
+import sys
+from typing import Any, Callable, Sequence
+
+import rclpy
+from rclpy.exceptions import InvalidParameterValueException, ParameterException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+
+from .contract import QosSpec, TopicSpec, resolve
+from .conversions import MessageKit, rclpy_kit
+from .vehicle_params import ParameterError
+
+_RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE, 'best_effort': ReliabilityPolicy.BEST_EFFORT}
+_DURABILITY = {'volatile': DurabilityPolicy.VOLATILE, 'transient_local': DurabilityPolicy.TRANSIENT_LOCAL}
+
+
+def qos_profile(spec: QosSpec) -> QoSProfile:
+    """rclpy QoSProfile of a contract QoS description."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=spec.depth,
+                      reliability=_RELIABILITY[spec.reliability], durability=_DURABILITY[spec.durability])
+
+
+def publisher(node: Node, kit: MessageKit, topic: TopicSpec):
+    """A publisher of a contract topic, relative names resolved in the node's namespace."""
+    return node.create_publisher(kit[topic.type], topic.name, qos_profile(topic.qos))
+
+
+def subscription(node: Node, kit: MessageKit, topic: TopicSpec, callback: Callable):
+    return node.create_subscription(kit[topic.type], topic.name, callback, qos_profile(topic.qos))
+
+
+def declare(node: Node, name: str, default: Any, description: str,
+            bounds: tuple[float, float] | None = None, choices: Sequence[str] | None = None) -> Any:
+    """Declare a parameter with its description and valid range, return its (validated) value.
+
+    An out-of-range or wrong-typed value (from a params file or --ros-args -p) raises
+    ParameterError naming the parameter and its valid range.
+    """
+    descriptor = ParameterDescriptor(description=description)
+    range_text = ''
+    if bounds is not None:
+        low, high = bounds
+        range_text = f' valid range [{low}, {high}]'
+        if isinstance(default, int) and not isinstance(default, bool):
+            descriptor.integer_range = [IntegerRange(from_value=int(low), to_value=int(high), step=0)]
+        else:
+            descriptor.floating_point_range = [FloatingPointRange(
+                from_value=float(low), to_value=float(high) if math.isfinite(high) else sys.float_info.max, step=0.0)]
+    if choices is not None:
+        range_text = f' valid values {", ".join(choices)}'
+        descriptor.additional_constraints = 'one of: ' + ', '.join(choices)
+    descriptor.description += f' ({range_text.strip()})' if range_text else ''
+    try:
+        value = node.declare_parameter(name, default, descriptor).value
+    except (InvalidParameterValueException, ParameterException, TypeError) as error:
+        raise ParameterError(f'parameter {name}: {error};{range_text}') from error
+    if choices is not None and value not in choices:
+        raise ParameterError(f'parameter {name}: {value!r} is not valid;{range_text}')
+    if bounds is not None and isinstance(value, float) and not math.isfinite(value):
+        raise ParameterError(f'parameter {name}: {value} is not finite;{range_text}')
+    return value
+
+
+def topic_name(node: Node, topic: TopicSpec) -> str:
+    return resolve(topic, node.get_namespace())
+
+
+def run_node(make_node: Callable[[MessageKit], Node], argv: list[str] | None = None) -> int:
+    """Init rclpy, build the node, spin until shutdown; invalid parameters end it with exit code 2."""
+    rclpy.init(args=argv if argv is not None else sys.argv)
+    node = None
+    code = 0
+    try:
+        node = make_node(rclpy_kit())
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except ParameterError as error:
+        print(f'[FATAL] invalid parameter: {error}', file=sys.stderr, flush=True)
+        code = 2
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return code

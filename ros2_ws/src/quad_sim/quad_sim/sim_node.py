@@ -1,0 +1,187 @@
+"""quad_sim node: the simulator core behind ``/clock``, ``odom`` and ``rotor_forces``.
+
+Modes:
+* lockstep (default): publish ``/clock`` and ``odom`` for time t, wait for the ``rotor_forces``
+  that answer them, integrate to the next odometry time, repeat. Sim time only advances when the
+  controller has answered, so a run is deterministic and can be faster than real time. If no
+  answer comes within ``input_timeout`` seconds of wall time the pending odometry is published
+  again (a controller that restarted gets it; one that already answered ignores the repeat).
+* realtime: a wall timer steps the simulation at ``odometry_rate / speed_factor``; the latest
+  forces are used. Forces older than ``input_timeout`` are stale: the rotors go to hover thrust.
+
+Non-finite or malformed forces are rejected (throttled error log), the last valid forces hold.
+"""
+from __future__ import annotations
+
+import collections
+import statistics
+import time
+
+import rclpy
+from rclpy.node import Node
+
+from quad_msgs_bridge.contract import CLOCK, ODOM, ROTOR_FORCES
+from quad_msgs_bridge.conversions import MessageKit, clock_msg, odometry_msg, rotor_forces_from_msg
+from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+
+from .model import QuadrotorModel
+from .simulator import Simulator
+
+MODES = ('lockstep', 'realtime')
+
+
+class SimNode(Node):
+    def __init__(self, kit: MessageKit):
+        super().__init__('quad_sim')
+        self.kit = kit
+        vehicle_file = declare(self, 'vehicle_file', '', 'vehicle YAML (Table I parameters); empty: the packaged one')
+        params, disturbances = load_vehicle_file(vehicle_file or None)
+        disturbances = disturbances.switched(declare(
+            self, 'disturbances', disturbances.enabled, 'apply the paper section IV disturbances'))
+        physics_rate = declare(self, 'physics_rate', 1000.0, 'RK4 integration rate [Hz]', (1.0, 1e6))
+        odometry_rate = declare(self, 'odometry_rate', 1000.0,
+                                'odometry, /clock and control rate [Hz]; physics_rate must be a whole multiple',
+                                (1.0, 1e6))
+        self.mode = declare(self, 'mode', 'lockstep', 'lockstep (wait for every answer) or realtime', choices=MODES)
+        self.speed_factor = declare(self, 'speed_factor', 1.0, 'realtime: sim seconds per wall second', (0.01, 100.0))
+        self.input_timeout = declare(self, 'input_timeout', 0.5,
+                                     'wall seconds without rotor forces before the stale-input behaviour', (0.001, 60.0))
+        self.duration = declare(self, 'duration', 0.0, 'stop stepping at this sim time [s]; 0: never', (0.0, 1e7))
+        self.wait_for_subscribers = declare(
+            self, 'wait_for_subscribers', 1,
+            'lockstep: start once odom has this many subscribers (the controller, plus any recorder)', (1, 1000))
+        self.exit_at_end = declare(self, 'exit_at_end', False, 'shut the node down once duration is reached')
+        start = declare(self, 'initial_state', [0.0] * 12,
+                        'x y z [m] vx vy vz [m/s] phi theta psi [rad] dphi dtheta dpsi [rad/s], world ENU')
+        substeps = physics_rate / odometry_rate
+        if abs(substeps - round(substeps)) > 1e-9:
+            raise ParameterError(f'parameter physics_rate: {physics_rate} Hz is not a whole multiple of '
+                                 f'odometry_rate {odometry_rate} Hz')
+        self.substeps = int(round(substeps))
+        try:
+            self.sim = Simulator(QuadrotorModel(params, disturbances), 1.0 / physics_rate, list(start))
+        except ValueError as error:
+            raise ParameterError(f'parameter initial_state: {error}') from error
+        self.hover_forces = (params.hover_force,) * 4
+        self.clock_pub = publisher(self, kit, CLOCK)
+        self.odom_pub = publisher(self, kit, ODOM)
+        self.forces_sub = subscription(self, kit, ROTOR_FORCES, self.on_forces)
+        self.last_forces_wall = time.monotonic()
+        self.started = False
+        self.stale = False
+        self.finished = False
+        self.first_publish_wall: float | None = None
+        self.published = 0
+        self.unanswered = collections.deque(maxlen=10000)   # wall times of odometry awaiting forces
+        self.latencies: list[float] = []
+        if self.mode == 'lockstep':
+            self.watchdog = self.create_timer(min(0.05, self.input_timeout), self.lockstep_watchdog)
+        else:
+            period = 1.0 / odometry_rate / self.speed_factor
+            self.step_timer = self.create_timer(period, self.realtime_step)
+        self.get_logger().info(
+            f'{self.mode} simulation: physics {physics_rate:g} Hz, odometry {odometry_rate:g} Hz, '
+            f'disturbances {"on" if disturbances.enabled else "off"}')
+
+    # --- shared -----------------------------------------------------------------------------
+    def publish_odometry(self) -> None:
+        sample = self.sim.odometry()
+        self.clock_pub.publish(clock_msg(self.kit, sample.stamp))
+        self.odom_pub.publish(odometry_msg(self.kit, sample))
+        now = time.monotonic()
+        if self.first_publish_wall is None:
+            self.first_publish_wall = now
+        self.published += 1
+        self.unanswered.append(now)
+
+    def answered(self) -> None:
+        """Forces arrived: they answer the oldest odometry not yet answered (the controller answers in order)."""
+        if self.unanswered:
+            self.latencies.append(time.monotonic() - self.unanswered.popleft())
+
+    def timing_report(self) -> str:
+        wall = time.monotonic() - (self.first_publish_wall or time.monotonic())
+        rate = self.published / wall if wall > 0 else 0.0
+        text = f'{self.published} odometry steps in {wall:.3f} s wall: {rate:.1f} steps/s'
+        if self.latencies:
+            ordered = sorted(self.latencies)
+            p99 = ordered[min(len(ordered) - 1, int(0.99 * len(ordered)))]
+            text += (f'; odom->forces latency median {statistics.median(ordered) * 1e3:.3f} ms, '
+                     f'p99 {p99 * 1e3:.3f} ms over {len(ordered)} answers')
+        return text
+
+    def at_end(self) -> bool:
+        if self.duration > 0.0 and self.sim.time >= self.duration - 1e-12:
+            if not self.finished:
+                self.finished = True
+                self.get_logger().info(f'reached duration {self.duration:g} s of sim time; {self.timing_report()}')
+                if self.exit_at_end:
+                    rclpy.shutdown(context=self.context)
+            return True
+        return False
+
+    def accept(self, msg) -> bool:
+        try:
+            forces = rotor_forces_from_msg(msg)
+        except ValueError as error:
+            self.get_logger().error(f'rejected rotor_forces: {error}', throttle_duration_sec=1.0)
+            return False
+        return self.sim.set_forces(forces)
+
+    # --- lockstep ---------------------------------------------------------------------------
+    def lockstep_watchdog(self) -> None:
+        if not self.started:
+            if (self.count_subscribers(ODOM.name) >= self.wait_for_subscribers
+                    and self.count_publishers(ROTOR_FORCES.name) > 0):
+                self.started = True
+                self.last_forces_wall = time.monotonic()
+                self.publish_odometry()
+            return
+        if self.finished or time.monotonic() - self.last_forces_wall < self.input_timeout:
+            return
+        if not self.stale:
+            self.stale = True
+            self.get_logger().warning(
+                f'no rotor_forces for {self.input_timeout:g} s at sim time {self.sim.time:.3f} s; '
+                'holding sim time and publishing the pending odometry again')
+        self.last_forces_wall = time.monotonic()
+        self.unanswered.clear()   # the repeat is answered, not the original
+        self.published -= 1       # a repeat is not a new step
+        self.publish_odometry()
+
+    def on_forces(self, msg) -> None:
+        self.answered()
+        if self.mode == 'realtime':
+            if self.accept(msg):
+                self.last_forces_wall = time.monotonic()
+                self.stale = False
+            return
+        if not self.started or self.finished:
+            return
+        self.accept(msg)   # a rejected message still answers: the last valid forces hold
+        self.last_forces_wall = time.monotonic()
+        self.stale = False
+        self.sim.advance(self.substeps)
+        if not self.at_end():
+            self.publish_odometry()
+
+    # --- realtime ---------------------------------------------------------------------------
+    def realtime_step(self) -> None:
+        if self.at_end():
+            return
+        if time.monotonic() - self.last_forces_wall > self.input_timeout:
+            if not self.stale:
+                self.stale = True
+                self.get_logger().warning(f'rotor_forces stale for {self.input_timeout:g} s: rotors at hover thrust')
+            self.sim.set_forces(self.hover_forces)
+        self.sim.advance(self.substeps)
+        self.publish_odometry()
+
+
+def main(argv: list[str] | None = None) -> int:
+    return run_node(SimNode, argv)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

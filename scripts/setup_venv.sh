@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Create (or reuse) a virtual environment and install pinned requirements into it.
+# Usage: scripts/setup_venv.sh VENV_DIR REQUIREMENTS_FILE
+# Works on a fresh Debian/Ubuntu machine with only Python 3.11+; installs python3-venv with apt
+# when the interpreter cannot create venvs and we may use apt (root or passwordless sudo).
+set -euo pipefail
+venv=$1; requirements=$2
+python=${PYTHON:-python3}
+"$python" - <<'PY' || { echo "error: Python 3.11 or newer is needed (found $("$python" --version 2>&1))" >&2; exit 1; }
+import sys
+sys.exit(0 if sys.version_info >= (3, 11) else 1)
+PY
+if [ ! -x "$venv/bin/python" ]; then
+  # --system-site-packages keeps a sourced ROS 2's rclpy importable from the venv.
+  if ! "$python" -m venv --system-site-packages "$venv" 2>/dev/null; then
+    rm -rf "$venv"
+    version=$("$python" -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')
+    if command -v apt-get >/dev/null && { [ "$(id -u)" = 0 ] || sudo -n true 2>/dev/null; }; then
+      sudo_cmd=$([ "$(id -u)" = 0 ] && echo "" || echo "sudo -n")
+      $sudo_cmd apt-get update -qq && $sudo_cmd apt-get install -y -qq "python$version-venv" || $sudo_cmd apt-get install -y -qq python3-venv
+      "$python" -m venv --system-site-packages "$venv"
+    else
+      echo "error: '$python -m venv' does not work here; install the venv module (sudo apt install python3-venv)" >&2
+      exit 1
+    fi
+  fi
+  touch "$venv/COLCON_IGNORE"   # colcon must not crawl the venv
+fi
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$requirements"
