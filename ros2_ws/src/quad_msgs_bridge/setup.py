@@ -22,5 +22,6 @@ setup(
     license='Apache-2.0',
     extras_require={'test': ['pytest']},
     entry_points={'console_scripts': [
+        'record = quad_msgs_bridge.recorder_node:main',
     ]},
 )

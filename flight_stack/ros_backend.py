@@ -1,0 +1,119 @@
+"""ROS backend: each node in its own process, in a namespace, like ``ros2 launch`` would start them.
+
+Order: the recorder first (it records what really goes over the topics), then the trajectory, the
+controller and the simulator. In lockstep the simulator waits for two ``odom`` subscribers (the
+controller and the recorder) and the recorder only subscribes to ``odom`` once it has discovered
+the controller's publishers, so the bag holds every step. The flight ends when the simulator has
+reached the duration and exits; the others are then stopped with SIGINT (then SIGTERM, SIGKILL),
+the recorder last so that it drains what is still in flight and finalizes the bag. If any node dies
+first, the rest are stopped the same way and the flight is reported as failed.
+
+The summary is computed from the bag: what was observed on the topics.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import yaml
+
+from .processes import NodeProcess, node_command, source_tree_environment, wait_for_exit
+
+
+@dataclass
+class RosFlightConfig:
+    namespace: str
+    controller: str
+    scenario: str
+    duration: float
+    disturbances: bool
+    seed: int
+    physics_rate: float
+    control_rate: float
+    initial_state: list[float]
+    bag: Path
+    topics: list[str]
+    mode: str = 'lockstep'
+    speed_factor: float = 1.0
+    setpoint_rate: float = 50.0
+    vehicle_file: Path | None = None
+    gains_file: Path | None = None
+    quiet: bool = False
+
+
+@dataclass
+class RosFlightResult:
+    wall_time_s: float
+    failed_node: str | None
+    exit_codes: dict[str, int]
+    sim_report: str
+
+
+def _ros_args(namespace: str, params: dict, params_file: Path | None = None) -> list[str]:
+    args = ['--ros-args', '-r', f'__ns:=/{namespace.strip("/")}']
+    if params_file is not None:
+        args += ['--params-file', str(params_file)]
+    for name, value in params.items():
+        if isinstance(value, bool):
+            text = 'true' if value else 'false'
+        elif isinstance(value, (list, tuple)):
+            text = yaml.safe_dump(list(value), default_flow_style=True, width=10 ** 6).strip()
+        else:
+            text = str(value)
+        args += ['-p', f'{name}:={text}']
+    return args
+
+
+def fly_ros(config: RosFlightConfig) -> RosFlightResult:
+    """Fly with every node in its own process; the bag at ``config.bag`` holds what went over the topics."""
+    env = source_tree_environment()
+    vehicle = {'vehicle_file': str(config.vehicle_file)} if config.vehicle_file else {}
+    nodes = [
+        ('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.recorder_node',
+         {'bag': str(config.bag), 'topics': config.topics, 'controller': config.controller,
+          'scenario': config.scenario, **vehicle}, None),
+        ('trajectory', 'nnit2fsmc_controller', 'trajectory', 'nnit2fsmc_controller.trajectory_node',
+         {'use_sim_time': True, 'scenario': config.scenario, 'duration': config.duration,
+          'setpoint_rate': config.setpoint_rate, 'start_time': 0.0}, None),
+        ('controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller.controller_node',
+         {'use_sim_time': True, 'controller': config.controller, 'nnit2fsmc.seed': config.seed, **vehicle},
+         config.gains_file),
+        ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node',
+         {'duration': config.duration, 'exit_at_end': True, 'disturbances': config.disturbances,
+          'physics_rate': config.physics_rate, 'odometry_rate': config.control_rate, 'mode': config.mode,
+          'speed_factor': config.speed_factor, 'wait_for_subscribers': 2,
+          'initial_state': config.initial_state, **vehicle}, None),
+    ]
+    processes: list[NodeProcess] = []
+    started = time.monotonic()
+    failed = None
+    try:
+        for name, package, executable, module, params, params_file in nodes:
+            command = node_command(package, executable, module) + _ros_args(config.namespace, params, params_file)
+            processes.append(NodeProcess(name, command, env, quiet=config.quiet))
+        sim = processes[-1]
+        # generous: start-up, discovery, and the flight at no less than a tenth of real time
+        timeout = 60.0 + 10.0 * config.duration / (config.speed_factor if config.mode == 'realtime' else 1.0)
+        dead = wait_for_exit(processes, until=sim, timeout=timeout)
+        if dead is not None:
+            failed = dead.name
+        elif sim.returncode != 0:
+            failed = sim.name
+        else:
+            time.sleep(0.5)   # let the last answers reach the recorder
+    except (KeyboardInterrupt, TimeoutError) as stop:
+        failed = 'interrupted' if isinstance(stop, KeyboardInterrupt) else f'timeout ({stop})'
+    finally:
+        codes = {}
+        for proc in reversed(processes[1:]):
+            codes[proc.name] = proc.stop()
+        if processes:
+            codes[processes[0].name] = processes[0].stop(grace=30.0)
+    wall = time.monotonic() - started
+    for name, code in codes.items():
+        # a node stopped by our SIGINT exits 0; anything else (a crash, a kill) is a failure
+        if failed is None and code != 0:
+            failed = name
+    report = next((line for line in reversed(processes[-1].lines) if 'steps/s' in line), '') if processes else ''
+    return RosFlightResult(wall, failed, codes, report)

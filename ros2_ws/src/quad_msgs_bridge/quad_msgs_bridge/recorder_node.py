@@ -1,0 +1,124 @@
+"""record node: writes what goes over the contract topics into a rosbag2 MCAP bag.
+
+Messages are recorded as the serialized CDR bytes that arrived, with two times: the log time is
+the sim time of the latest ``/clock`` the recorder received (wall time before the first one), the
+publish time is the wall time the publisher sent it (DDS source timestamp), so a bag shows both
+the flight in sim time and the real message latencies.
+
+Per-step topics published by the controller must be discovered before ``odom`` is subscribed:
+a lockstep simulator that waits for the recorder's ``odom`` subscription then starts only when
+nothing of the flight can be missed. SIGINT/SIGTERM stop it cleanly: everything already received
+is drained and the bag is finalized.
+"""
+from __future__ import annotations
+
+import signal
+import sys
+import time
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+
+from .bag_writer import BagWriter
+from .contract import CLOCK, ODOM, RECORDED_TOPICS, TopicSpec, resolve
+from .conversions import MessageKit, rclpy_kit
+from .ros_helpers import declare, qos_profile
+from .timebase import NANOSECONDS_PER_SECOND
+from .vehicle_params import ParameterError
+
+RECORD_DEPTH = 10000   #: reader history: the recorder never drops a message it was sent
+
+
+class RecorderNode(Node):
+    def __init__(self, kit: MessageKit):
+        super().__init__('recorder')
+        bag = declare(self, 'bag', '', 'bag directory to create (required)')
+        names = declare(self, 'topics', [t.name for t in RECORDED_TOPICS], 'contract topics to record')
+        queue_size = declare(self, 'queue_size', 100000, 'messages buffered for the writer thread', (1, 10 ** 7))
+        custom = {key: declare(self, key, '', f'{key} stored in the bag metadata')
+                  for key in ('controller', 'scenario', 'vehicle_file')}
+        if not bag:
+            raise ParameterError('parameter bag: a bag directory is required')
+        known = {t.name: t for t in RECORDED_TOPICS}
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise ParameterError(f'parameter topics: {unknown} are not contract topics ({", ".join(known)})')
+        self.topics = [known[n] for n in names]
+        namespace = self.get_namespace()
+        self.writer = BagWriter(bag, self.topics, namespace, custom_data={k: v for k, v in custom.items() if v},
+                                queue_size=queue_size)
+        self.kit = kit
+        self.clock_ns: int | None = None
+        self.received = 0
+        for topic in self.topics:
+            if topic is not ODOM:
+                self.subscribe(topic)
+        self.gate = self.create_timer(0.02, self.open_gate) if ODOM in self.topics else None
+        self.get_logger().info(f'recording {len(self.topics)} topics of {namespace} into {bag}')
+
+    def subscribe(self, topic: TopicSpec) -> None:
+        name = resolve(topic, self.get_namespace())
+        qos = qos_profile(topic.qos)
+        profile = QoSProfile(history=qos.history, depth=max(qos.depth, RECORD_DEPTH),
+                             reliability=qos.reliability, durability=qos.durability)
+        is_clock = topic is CLOCK
+
+        def on_message(data: bytes, info) -> None:
+            now = time.time_ns()
+            if is_clock:   # CDR: 4-byte encapsulation header, then int32 sec, uint32 nanosec
+                sec = int.from_bytes(data[4:8], 'little', signed=True)
+                self.clock_ns = sec * NANOSECONDS_PER_SECOND + int.from_bytes(data[8:12], 'little')
+            log_time = self.clock_ns if self.clock_ns is not None else now
+            self.writer.write_serialized(name, data, log_time, info.get('source_timestamp', now) or now)
+            self.received += 1
+
+        self.create_subscription(self.kit[topic.type], topic.name, on_message, profile, raw=True)
+
+    def open_gate(self) -> None:
+        """Subscribe to odom once every recorded per-step topic has a discovered publisher."""
+        waiting = [t.name for t in self.topics
+                   if t.qos.durability == 'volatile' and t not in (ODOM, CLOCK) and self.count_publishers(t.name) == 0]
+        if waiting:
+            return
+        self.gate.cancel()
+        self.subscribe(ODOM)
+        self.get_logger().info('controller publishers discovered; recording odom')
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Spin until SIGINT/SIGTERM, then drain what has arrived and finalize the bag."""
+    rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    stop = []
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda number, frame: stop.append(number))
+    node = None
+    try:
+        node = RecorderNode(rclpy_kit())
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        while not stop:
+            executor.spin_once(timeout_sec=0.1)
+        quiet_since = time.monotonic()
+        while time.monotonic() - quiet_since < 0.3:
+            before = node.received
+            executor.spin_once(timeout_sec=0.05)
+            if node.received != before:
+                quiet_since = time.monotonic()
+    except ParameterError as error:
+        print(f'[FATAL] invalid parameter: {error}', file=sys.stderr, flush=True)
+        return 2
+    finally:
+        if node is not None:
+            node.writer.close()
+            dropped = f', {node.writer.dropped} DROPPED (writer queue full)' if node.writer.dropped else ''
+            print(f'recorder: {node.received} messages written to {node.writer.path}{dropped}', flush=True)
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 1 if node is not None and node.writer.dropped else 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
