@@ -1,0 +1,150 @@
+"""ROS 2 integration: the three nodes in their own processes, over real topics (skipped without rclpy)."""
+from __future__ import annotations
+
+import math
+import shutil
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from ros_support import HAVE_RCLPY, ROOT, node_process, requires_ros, spin_until
+
+pytestmark = [requires_ros, pytest.mark.ros]
+
+if HAVE_RCLPY:
+    import rclpy
+    from rclpy.qos import QoSProfile
+
+    from quad_msgs_bridge.ros_helpers import qos_profile
+
+from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
+                                       REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, resolve)
+from quad_msgs_bridge.conversions import odometry_from_msg, pose_stamped_msg, rclpy_kit
+from quad_msgs_bridge.state import state_from_odometry
+from nnit2fsmc_controller.trajectory import Hover, make_scenario
+
+
+@pytest.fixture
+def ros_node():
+    rclpy.init()
+    node = rclpy.create_node('integration_test')
+    yield node
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def stop_all(processes):
+    return {p.name: p.stop() for p in reversed(processes)}
+
+
+def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
+    namespace = 'contract_check'
+    kit = rclpy_kit()
+    received = {}
+    for topic in (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, SETPOINTS, REFERENCE_PATH):
+        ros_node.create_subscription(kit[topic.type], resolve(topic, namespace),
+                                     lambda msg, name=topic.name: received.setdefault(name, msg), qos_profile(topic.qos))
+    initial = Hover().initial_state
+    processes = [
+        node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
+                     {'scenario': 'hover', 'start_time': 0.0, 'use_sim_time': True}),
+        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {'use_sim_time': True}),
+        node_process('sim', 'quad_sim.sim_node', namespace,
+                     {'duration': 2.0, 'initial_state': initial, 'wait_for_subscribers': 2}),
+    ]
+    try:
+        assert spin_until(ros_node, lambda: len(received) == 7, timeout=30.0), f'only got {sorted(received)}'
+        types = dict(ros_node.get_topic_names_and_types())
+    finally:
+        codes = stop_all(processes)
+    assert all(code == 0 for code in codes.values()), codes
+    for topic in (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, SETPOINTS,
+                  REFERENCE_PATH, GOAL_POSE):
+        assert types[resolve(topic, namespace)] == [topic.type]
+    assert types['/clock'] == ['rosgraph_msgs/msg/Clock']
+    odom = received['odom']
+    assert (odom.header.frame_id, odom.child_frame_id) == ('odom', 'base_link')
+    assert received['control/wrench'].header.frame_id == 'base_link'
+    assert received['rotor_forces'].layout.dim[0].size == 4
+    assert received['reference_path'].header.frame_id == 'odom'
+    assert len(received['setpoints'].points) > 1
+
+
+@pytest.mark.parametrize('mode', ['lockstep'])
+def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path, mode):
+    from rosbags.highlevel import AnyReader
+    from rosbags.typesys import Stores, get_typestore
+    from flight_stack.embedded import fly_embedded
+    from flight_stack.ros_backend import RosFlightConfig, fly_ros
+    from nnit2fsmc_controller.factory import load_gains
+    from quad_msgs_bridge.contract import RECORDED_TOPICS
+    from quad_msgs_bridge.vehicle_params import load_vehicle_file
+
+    duration = 2.0
+    trajectory = make_scenario('paper', duration)
+    config = RosFlightConfig(namespace='equal', controller='nnit2fsmc', scenario='paper', duration=duration,
+                             disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0,
+                             initial_state=trajectory.initial_state, bag=tmp_path / 'bag',
+                             topics=[t.name for t in RECORDED_TOPICS], mode=mode, quiet=True)
+    result = fly_ros(config)
+    assert result.failed_node is None, result
+    with AnyReader([tmp_path / 'bag'], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        odom = [c for c in reader.connections if c.topic == '/equal/odom']
+        samples = [odometry_from_msg(reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages(odom)]
+    params, disturbances = load_vehicle_file()
+    embedded = fly_embedded('nnit2fsmc', trajectory, params, disturbances, load_gains(), duration, 1000.0)
+    assert len(samples) == embedded.steps
+    ros_states = np.array([state_from_odometry(s) for s in samples])
+    assert np.abs(np.array([s.stamp for s in samples]) - embedded.record.time).max() == 0.0
+    assert np.abs(ros_states[:, :3] - embedded.record.position).max() <= 1e-9
+    assert np.abs(ros_states[:, 8] - embedded.record.yaw).max() <= 1e-9
+
+
+def test_goal_pose_is_flown_to_and_held(ros_node):
+    namespace = 'goal_check'
+    kit = rclpy_kit()
+    goal = (0.8, -0.6, 1.4)
+    start = Hover(position=(0.0, 0.0, 1.0))
+    latest = []
+    ros_node.create_subscription(kit[ODOM.type], resolve(ODOM, namespace),
+                                 lambda msg: latest.append(odometry_from_msg(msg)), QoSProfile(depth=1000))
+    goal_pub = ros_node.create_publisher(kit[GOAL_POSE.type], resolve(GOAL_POSE, namespace), 10)
+    processes = [
+        node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
+                     {'scenario': 'hover', 'start_time': 0.0, 'use_sim_time': True}),
+        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {'use_sim_time': True}),
+        node_process('sim', 'quad_sim.sim_node', namespace,
+                     {'duration': 14.0, 'initial_state': start.initial_state, 'wait_for_subscribers': 2}),
+    ]
+    try:
+        assert spin_until(ros_node, lambda: latest and latest[-1].stamp >= 3.0, timeout=60.0)
+        goal_pub.publish(pose_stamped_msg(kit, latest[-1].stamp, goal, 0.5))
+        assert spin_until(ros_node, lambda: latest[-1].stamp >= 13.9, timeout=120.0)
+    finally:
+        codes = stop_all(processes)
+    assert all(code == 0 for code in codes.values()), codes
+    final = latest[-1]
+    assert math.dist(final.position, goal) < 0.05
+    yaw = state_from_odometry(final)[8]
+    assert abs(yaw - 0.5) < 0.05
+    at_goal_time = [s for s in latest if s.stamp <= 3.0][-1]
+    assert math.dist(at_goal_time.position, (0.0, 0.0, 1.0)) < 0.05   # it was hovering before the goal
+
+
+@pytest.mark.parametrize('module, params, name', [
+    ('quad_sim.sim_node', {'physics_rate': -5.0}, 'physics_rate'),
+    ('quad_sim.sim_node', {'mode': 'warp'}, 'mode'),
+    ('nnit2fsmc_controller.controller_node', {'nnit2fsmc.axes.x.fuzzy_gain': -1.0}, 'nnit2fsmc.axes.x.fuzzy_gain'),
+    ('nnit2fsmc_controller.controller_node', {'controller': 'lqr'}, 'controller'),
+    ('nnit2fsmc_controller.trajectory_node', {'scenario': 'loop'}, 'scenario'),
+])
+def test_invalid_parameter_is_refused_at_start_naming_it(module, params, name):
+    from flight_stack.processes import source_tree_environment
+    from flight_stack.ros_backend import _ros_args
+    done = subprocess.run([sys.executable, '-m', module] + _ros_args('bad', params), env=source_tree_environment(),
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, done.stdout + done.stderr
+    assert f'parameter {name}' in done.stderr
+    assert 'valid' in done.stderr
