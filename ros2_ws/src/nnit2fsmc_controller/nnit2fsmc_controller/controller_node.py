@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -24,7 +25,7 @@ from quad_msgs_bridge.conversions import (MessageKit, diagnostics_msg, goal_from
                                           pose_stamped_msg, rotor_forces_msg, setpoints_from_msg, wrench_msg)
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.reference import SetpointPath
-from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
+from quad_msgs_bridge.ros_helpers import declare, publisher, qos_profile, run_node, subscription
 from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.timebase import nanoseconds
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
@@ -46,6 +47,8 @@ class ControllerNode(Node):
                                   (0.01, 10.0))
         self.odom_timeout = declare(self, 'odom_timeout', 0.5, 'wall seconds without odometry before warning',
                                     (0.001, 60.0))
+        latest_only = declare(self, 'latest_only', False,
+                              'answer only the newest odometry (realtime); false: answer every one in order (lockstep)')
         self.params, _ = load_vehicle_file(vehicle_file or None)
         gains = {}
         for name, default in flatten_gains(load_gains(gains_file or None)).items():
@@ -62,7 +65,11 @@ class ControllerNode(Node):
         self.wrench_pub = publisher(self, kit, CONTROL_WRENCH)
         self.reference_pub = publisher(self, kit, CONTROL_REFERENCE)
         self.diagnostics_pub = publisher(self, kit, CONTROL_DIAGNOSTICS)
-        subscription(self, kit, ODOM, self.on_odometry)
+        if latest_only:   # realtime: a controller that falls behind skips to the newest odometry
+            self.create_subscription(kit[ODOM.type], ODOM.name, self.on_odometry,
+                                     qos_profile(replace(ODOM.qos, depth=1)))
+        else:
+            subscription(self, kit, ODOM, self.on_odometry)
         subscription(self, kit, SETPOINTS, self.on_setpoints)
         subscription(self, kit, GOAL_POSE, self.on_goal)
         self.path: SetpointPath | None = None
