@@ -40,6 +40,7 @@ class RosFlightConfig:
     vehicle_file: Path | None = None
     gains_file: Path | None = None
     quiet: bool = False
+    record: bool = True       #: False: no recorder process (for timing the bare three-node loop)
 
 
 @dataclass
@@ -83,9 +84,11 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
         ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node',
          {'duration': config.duration, 'exit_at_end': True, 'disturbances': config.disturbances,
           'physics_rate': config.physics_rate, 'odometry_rate': config.control_rate, 'mode': config.mode,
-          'speed_factor': config.speed_factor, 'wait_for_subscribers': 2,
+          'speed_factor': config.speed_factor, 'wait_for_subscribers': 2 if config.record else 1,
           'initial_state': config.initial_state, **vehicle}, None),
     ]
+    if not config.record:
+        nodes = nodes[1:]
     processes: list[NodeProcess] = []
     started = time.monotonic()
     failed = None

@@ -40,6 +40,12 @@ class NNIT2FSMCLaw:
     with e and de as inputs, online learning also adapts a feedback gain (the MIT-rule
     mechanism) and was seen to drive the position loop into a limit cycle at learning rates
     that are otherwise useful; the fuzzy term alone provides the feedback.
+
+    The network learns only while |S| is inside the fuzzy universe (|S| < input_scale). Beyond
+    it the fuzzy term is saturated: it then measures how far the state is from the surface
+    (reaching phase), not the error of the equivalent control, and learning from it winds the
+    network up (on a descending step the z estimate fell from +4.6 N to -6 N and the vehicle
+    hit the ground).
     """
 
     def __init__(self, lam: float, fuzzy: IT2FuzzyCorrector, network: EquivalentControlNetwork):
@@ -51,7 +57,8 @@ class NNIT2FSMCLaw:
         surface = de + self.lam * e
         corrective = self.fuzzy(surface)
         equivalent = self.network.forward((ref_vel, ref_acc, 1.0))
-        self.network.learn(corrective)
+        if abs(surface) < self.fuzzy.input_scale:
+            self.network.learn(corrective)
         return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
 
 
@@ -67,7 +74,7 @@ class SlidingModeLaw:
         """sign(S), or sat(S / boundary_layer) when a boundary layer is set."""
         if self.boundary_layer > 0.0:
             return max(-1.0, min(1.0, surface / self.boundary_layer))
-        return (surface > 0.0) - (surface < 0.0)
+        return 1.0 if surface > 0.0 else -1.0 if surface < 0.0 else 0.0   # also for numpy scalars
 
     def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
         surface = de + self.lam * e

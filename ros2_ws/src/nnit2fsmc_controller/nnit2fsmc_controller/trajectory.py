@@ -71,7 +71,12 @@ class Hover:
 
 @dataclass(frozen=True)
 class Steps:
-    """Piecewise-constant setpoints: (start time [s], position [m, world ENU], yaw [rad]) each."""
+    """Setpoint steps: (start time [s], position [m, world ENU], yaw [rad]) each.
+
+    Each step is reached by a minimum-jerk transition of ``rise_time`` [s] from the previous
+    setpoint: a true jump has no velocity or acceleration a controller (or a sampled setpoint
+    path) could follow, a short smooth transition does.
+    """
 
     steps: tuple[tuple[float, Vec3, float], ...] = (
         (0.0, (0.0, 0.0, 1.0), 0.0),
@@ -79,18 +84,20 @@ class Steps:
         (10.0, (1.0, 1.0, 1.5), 0.5),
         (15.0, (0.0, 0.0, 1.0), 0.0))
     duration: float = 20.0
+    rise_time: float = 2.0
 
     def __post_init__(self):
         times = [step[0] for step in self.steps]
-        if not self.steps or times != sorted(times) or times[0] != 0.0:
-            raise ParameterError('steps: start times must begin at 0 and increase')
+        if not self.steps or times[0] != 0.0 or any(b - a <= self.rise_time for a, b in zip(times, times[1:])):
+            raise ParameterError(f'steps: start times must begin at 0 and be more than rise_time '
+                                 f'({self.rise_time} s) apart')
+        points = [self.steps[0]]
+        for (_, before, yaw_before), (t, after, yaw_after) in zip(self.steps, self.steps[1:]):
+            points += [(t, before, yaw_before), (t + self.rise_time, after, yaw_after)]
+        object.__setattr__(self, '_path', Waypoints(tuple(points)))
 
     def sample(self, t: float) -> ReferenceSample:
-        current = self.steps[0]
-        for step in self.steps:
-            if step[0] <= t:
-                current = step
-        return hold(current[1], current[2])
+        return self._path.sample(t)
 
     @property
     def initial_state(self) -> list[float]:

@@ -1,0 +1,249 @@
+"""The cascaded controller: eq. (10) as meant, input checks, rotor limits, building from the gains file."""
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from nnit2fsmc_controller.axis_laws import AxisOutput, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
+from nnit2fsmc_controller.controller import AXES, CascadedController, RateFilter
+from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, control_period, load_gains
+from quad_msgs_bridge.frames import rotation_from_euler
+from quad_msgs_bridge.mixer import controls_from_forces
+from quad_msgs_bridge.reference import ReferenceSample, hold
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_sim.model import QuadrotorModel
+
+PARAMS, DISTURBANCES = load_vehicle_file()
+GAINS = load_gains()
+
+
+def realised_horizontal_acceleration(phi, theta, psi):
+    """Horizontal acceleration [m/s^2] of eq. (1) when U1 is chosen to hold the vertical (specific force g)."""
+    thrust_direction = np.array(rotation_from_euler(phi, theta, psi))[:, 2]
+    return PARAMS.g * thrust_direction[:2] / thrust_direction[2]
+
+
+@pytest.mark.parametrize('seed', range(12))
+def test_eq10_attitude_realises_the_commanded_acceleration_at_any_heading(seed):
+    rng = np.random.default_rng(seed)
+    controller = build_controller('nnit2fsmc', PARAMS, GAINS)
+    limit = PARAMS.g * math.tan(controller.max_tilt)
+    ax, ay = rng.uniform(-1.0, 1.0, 2) * limit / math.sqrt(2.0)   # inside the tilt limit
+    psi = float(rng.uniform(-math.pi, math.pi))
+    phi_d, theta_d = controller.attitude_from_accelerations(ax, ay, psi)
+    np.testing.assert_allclose(realised_horizontal_acceleration(phi_d, theta_d, psi), (ax, ay), atol=1e-12)
+
+
+def test_eq10_small_angle_form_at_zero_yaw():
+    """theta_d ~ v_x / g and phi_d ~ -v_y / g: the x law drives the pitch, the y law the roll."""
+    controller = build_controller('nnit2fsmc', PARAMS, GAINS)
+    phi_d, theta_d = controller.attitude_from_accelerations(0.01, 0.02, 0.0)
+    # the exact form differs from the linear one at second order: (0.02 / g)^2 ~ 4e-6 relative
+    assert theta_d == pytest.approx(0.01 / PARAMS.g, rel=1e-4)
+    assert phi_d == pytest.approx(-0.02 / PARAMS.g, rel=1e-4)
+
+
+@pytest.mark.parametrize('psi', [0.0, 1.0, -2.8])
+def test_eq10_tilt_limit_keeps_the_direction(psi):
+    controller = build_controller('nnit2fsmc', PARAMS, GAINS)
+    ax, ay = 30.0, -40.0          # 50 m/s^2: far beyond g tan(max_tilt)
+    phi_d, theta_d = controller.attitude_from_accelerations(ax, ay, psi)
+    realised = realised_horizontal_acceleration(phi_d, theta_d, psi)
+    np.testing.assert_allclose(realised, np.array([ax, ay]) / 50.0 * PARAMS.g * math.tan(controller.max_tilt),
+                               atol=1e-12)
+    tilt = math.acos(math.cos(phi_d) * math.cos(theta_d))
+    assert tilt == pytest.approx(controller.max_tilt, abs=1e-12)
+
+
+def network_weights(controller):
+    return copy.deepcopy({axis: (law.network.output_weights, law.network.hidden_weights)
+                          for axis, law in controller.laws.items()})
+
+
+@pytest.mark.parametrize('where', ['state', 'reference'])
+@pytest.mark.parametrize('bad', [math.nan, math.inf])
+def test_non_finite_input_is_refused_before_any_learning(where, bad):
+    controller = build_controller('nnit2fsmc', PARAMS, GAINS)
+    fresh = build_controller('nnit2fsmc', PARAMS, GAINS)
+    state = [0.1, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    reference = hold((0.0, 0.0, 1.2))
+    before = network_weights(controller)
+    bad_state, bad_reference = list(state), reference
+    if where == 'state':
+        bad_state[7] = bad
+    else:
+        bad_reference = reference._replace(acceleration=(0.0, bad, 0.0))
+    with pytest.raises(ValueError, match='non-finite'):
+        controller.update(0.0, bad_state, bad_reference)
+    assert network_weights(controller) == before
+    # nothing else moved either (rate filters): the next valid update is that of a fresh controller
+    assert controller.update(0.0, state, reference) == fresh.update(0.0, state, reference)
+
+
+def wild_input(rng):
+    """A state far from any equilibrium and an unrelated reference, as plain floats."""
+    state = [*rng.normal(0, 3, 6), *rng.uniform(-1.0, 1.0, 2), rng.uniform(-math.pi, math.pi), *rng.normal(0, 5, 3)]
+    reference = ReferenceSample(tuple(map(float, rng.normal(0, 3, 3))), tuple(map(float, rng.normal(0, 2, 3))),
+                                tuple(map(float, rng.normal(0, 5, 3))), float(rng.uniform(-math.pi, math.pi)))
+    return [float(v) for v in state], reference
+
+
+@pytest.mark.parametrize('kind', CONTROLLERS)
+def test_numpy_scalars_are_accepted_like_floats(kind):
+    """A node may hand over numpy float64 values (message arrays); the result must not change."""
+    rng = np.random.default_rng(4)
+    plain, as_numpy = build_controller(kind, PARAMS, GAINS), build_controller(kind, PARAMS, GAINS)
+    for k in range(20):
+        state, reference = wild_input(rng)
+        expected = plain.update(k * 1e-3, state, reference)
+        got = as_numpy.update(k * 1e-3, list(np.array(state)), reference)
+        np.testing.assert_allclose(got.forces, expected.forces, rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize('kind', CONTROLLERS)
+def test_every_kind_builds_and_keeps_rotor_forces_within_limits(kind):
+    controller = build_controller(kind, PARAMS, GAINS)
+    assert controller.name == kind and set(controller.laws) == set(AXES)
+    assert controller.dt == control_period(GAINS)
+    rng = np.random.default_rng(1)
+    for k in range(300):
+        state, reference = wild_input(rng)
+        out = controller.update(k * controller.dt, state, reference)
+        assert all(PARAMS.F_min <= f <= PARAMS.F_max for f in out.forces)
+        np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, PARAMS.yaw_coefficient),
+                                   atol=1e-15)
+        assert all(math.isfinite(a.value) for a in out.axes.values())
+
+
+@pytest.mark.parametrize('kind', ['smc-sign', 'smc-sat', 'pid'])
+@pytest.mark.parametrize('yaw', [0.0, 2.0])
+def test_model_based_controllers_command_the_hover_forces_at_equilibrium(kind, yaw):
+    controller = build_controller(kind, PARAMS, GAINS)
+    state = [0.5, -1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, yaw, 0.0, 0.0, 0.0]
+    out = controller.update(0.0, state, hold((0.5, -1.0, 2.0), yaw))
+    np.testing.assert_allclose(out.forces, (PARAMS.hover_force,) * 4, rtol=1e-14)
+
+
+def test_nnit2fsmc_starts_knowing_nothing():
+    """The network starts at zero and the fuzzy term is zero on the surface: the thrust must be learned."""
+    controller = build_controller('nnit2fsmc', PARAMS, GAINS)
+    out = controller.update(0.0, [0.0, 0.0, 1.0] + [0.0] * 9, hold((0.0, 0.0, 1.0)))
+    assert out.forces == (0.0, 0.0, 0.0, 0.0)
+    assert all(isinstance(law, NNIT2FSMCLaw) for law in controller.laws.values())
+
+
+class SpyLaw:
+    """Records what the cascade hands a law and answers a fixed virtual control."""
+
+    def __init__(self, value):
+        self.value, self.calls = value, []
+
+    def update(self, e, de, ref_vel, ref_acc, drift, gain):
+        self.calls.append((e, de, ref_vel, ref_acc, drift, gain))
+        return AxisOutput(self.value, de, self.value, 0.0)
+
+
+def test_nominal_model_of_the_baselines_is_eq1():
+    """For z, phi, theta, psi: q'' = drift + gain * v reproduces the simulator's eq. (1) exactly."""
+    values = {'x': 0.0, 'y': 0.0, 'z': 5.1, 'phi': 0.05, 'theta': -0.04, 'psi': 0.002}
+    laws = {axis: SpyLaw(v) for axis, v in values.items()}
+    controller = CascadedController('spy', PARAMS, laws, dt=1e-3)
+    state = [0.1, 0.2, 1.5, 0.3, -0.2, 0.1, 0.1, -0.05, 0.4, 0.5, -0.7, 0.9]
+    out = controller.update(0.0, state, hold((0.0, 0.0, 1.5), 0.4))
+    assert out.forces == pytest.approx(tuple(out.forces))   # inside the limits: U realised exactly
+    np.testing.assert_allclose(out.controls, [values['z'], values['phi'], values['theta'], values['psi']],
+                               atol=1e-12)
+    derivative = QuadrotorModel(PARAMS, DISTURBANCES.switched(False)).derivative(0.0, state, out.controls)
+    for axis, index in (('z', 5), ('phi', 9), ('theta', 10), ('psi', 11)):
+        *_, drift, gain = laws[axis].calls[0]
+        assert drift + gain * values[axis] == pytest.approx(derivative[index], rel=1e-12), axis
+
+
+def test_yaw_error_is_wrapped():
+    laws = {axis: SpyLaw(0.0) for axis in AXES}
+    controller = CascadedController('spy', PARAMS, laws, dt=1e-3)
+    state = [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.1, 0.0, 0.0, 0.0]
+    controller.update(0.0, state, hold((0.0, 0.0, 1.0), -3.1))
+    e_psi = laws['psi'].calls[0][0]
+    assert e_psi == pytest.approx(6.2 - 2 * math.pi, abs=1e-12)   # -0.083 rad, not 6.2 rad
+
+
+def test_rate_filter_follows_a_ramp():
+    rate_filter = RateFilter(dt=1e-3, tau=0.02)
+    for k in range(1000):
+        rate = rate_filter.update(0.3 * k * 1e-3)
+    assert rate == pytest.approx(0.3, rel=1e-9)   # first-order lag: error decays as exp(-t/tau)
+
+
+def test_missing_law_is_refused():
+    with pytest.raises(ValueError, match='psi'):
+        CascadedController('partial', PARAMS, {axis: SpyLaw(0.0) for axis in AXES[:5]}, dt=1e-3)
+
+
+def edited(dotted, value):
+    gains = copy.deepcopy(GAINS)
+    *path, last = dotted.split('.')
+    node = gains
+    for key in path:
+        node = node[key]
+    if value is KeyError:
+        del node[last]
+    else:
+        node[last] = value
+    return gains
+
+
+@pytest.mark.parametrize('kind, dotted, value, fragment', [
+    ('nnit2fsmc', 'common.control_rate', 0.0, 'common.control_rate'),
+    ('nnit2fsmc', 'common.lambda.z', -3.0, 'common.lambda.z'),
+    ('pid', 'common.lambda.psi', math.nan, 'common.lambda.psi'),
+    ('nnit2fsmc', 'common.max_tilt', 2.0, 'max_tilt'),
+    ('smc-sat', 'common.angle_filter_tau', 0.0, 'common.angle_filter_tau'),
+    ('nnit2fsmc', 'nnit2fsmc.axes.x.input_scale', 0.0, 'nnit2fsmc.axes.x.input_scale'),
+    ('nnit2fsmc', 'nnit2fsmc.axes.theta.fuzzy_gain', -1.0, 'nnit2fsmc.axes.theta.fuzzy_gain'),
+    ('nnit2fsmc', 'nnit2fsmc.axes.z.nn_gain', 0.0, 'nnit2fsmc.axes.z.nn_gain'),
+    ('nnit2fsmc', 'nnit2fsmc.axes.psi.learning_rate', 'fast', 'nnit2fsmc.axes.psi.learning_rate'),
+    ('nnit2fsmc', 'nnit2fsmc.axes.y', KeyError, 'nnit2fsmc.axes.y'),
+    ('nnit2fsmc', 'nnit2fsmc.lower_height', 1.5, 'lower_height'),
+    ('nnit2fsmc', 'nnit2fsmc.type_reducer', 'centroid', 'type_reducer'),
+    ('nnit2fsmc', 'nnit2fsmc.weight_limit', 0.0, 'nnit2fsmc.weight_limit'),
+    ('smc-sign', 'smc.switching_gain.phi', -5.0, 'smc.switching_gain.phi'),
+    ('smc-sat', 'smc.boundary_layer.x', 0.0, 'smc.boundary_layer.x'),
+    ('pid', 'pid.axes.z.kp', -9.0, 'pid.axes.z.kp'),
+    ('pid', 'pid.axes.phi.integral_limit', math.inf, 'pid.axes.phi.integral_limit'),
+])
+def test_invalid_gains_are_named(kind, dotted, value, fragment):
+    with pytest.raises(ParameterError, match=fragment.replace('.', r'\.')):
+        build_controller(kind, PARAMS, edited(dotted, value))
+
+
+def test_unknown_controller_kind_is_named():
+    with pytest.raises(ParameterError, match="controller: 'lqr'"):
+        build_controller('lqr', PARAMS, GAINS)
+
+
+def test_unreadable_gains_files(tmp_path):
+    with pytest.raises(ParameterError, match='controller file'):
+        load_gains(tmp_path / 'absent.yaml')
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('common: {control_rate: [\n')
+    with pytest.raises(ParameterError, match='not valid YAML'):
+        load_gains(broken)
+    scalar = tmp_path / 'scalar.yaml'
+    scalar.write_text('42\n')
+    with pytest.raises(ParameterError, match='expected a mapping'):
+        load_gains(scalar)
+
+
+def test_law_classes_validate_lambda():
+    for make in (lambda: SlidingModeLaw(0.0, 1.0), lambda: PIDLaw(-1.0, 1, 1, 1, 1, 1e-3)):
+        with pytest.raises(ParameterError, match='lambda'):
+            make()
+
+
+def test_sign_and_saturated_switching():
+    sign = SlidingModeLaw(2.0, 1.0)
+    assert [sign.switching(s) for s in (-0.5, 0.0, 1e-12)] == [-1, 0, 1]
+    saturated = SlidingModeLaw(2.0, 1.0, boundary_layer=0.1)
+    assert [saturated.switching(s) for s in (-1.0, -0.05, 0.0, 0.02, 3.0)] == pytest.approx([-1, -0.5, 0, 0.2, 1])
