@@ -9,10 +9,16 @@ The default (auto) is ros when rclpy can be imported, else embedded.
 Examples:
   python3 run_stack.py                                   # the paper's flight, NNIT2FSMC
   python3 run_stack.py --controller smc-sign --no-disturbances --out out/sign
+
+Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover`:
+  python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
+  python3 run_stack.py recover BAG                       # finalize the bag of a killed recording
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 from pathlib import Path
 
@@ -21,6 +27,11 @@ from flight_stack.embedded import fly_embedded
 from flight_stack.summary import build_summary, format_summary, write_summary
 from nnit2fsmc_controller.factory import CONTROLLERS, load_gains
 from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
+from quad_msgs_bridge.bag_recover import recover_main
+from quad_msgs_bridge.contract import RECORDED_TOPICS
+from quad_msgs_bridge.flight_bag import FlightBag, select_topics
+from quad_msgs_bridge.mcap_file import BagWriteError
+from quad_msgs_bridge.review import main as review_main, review_bags
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number, load_vehicle_file
 
 
@@ -42,7 +53,26 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--max-error', type=float, default=1.0,
                         help='the flight fails if the position error after settling exceeds this [m]')
     parser.add_argument('--quiet', action='store_true', help='no progress lines')
+    parser.add_argument('--bag', type=Path, default=None,
+                        help='record the flight into this rosbag2 (MCAP) folder (default OUT/bag); '
+                             'then review it into OUT (report.html, plots/)')
+    parser.add_argument('--no-bag', action='store_true', help='record no bag (and write no report)')
+    parser.add_argument('--topics', nargs='+', default=None, metavar='TOPIC',
+                        help='contract topics to record (default: all of '
+                             + ' '.join(t.name for t in RECORDED_TOPICS) + ')')
     return parser.parse_args(argv)
+
+
+@contextlib.contextmanager
+def sigterm_as_interrupt():
+    """SIGTERM stops the flight like Ctrl-C (KeyboardInterrupt), so the bag is closed either way."""
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(f'signal {signum}')
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def choose_backend(requested: str) -> str:
@@ -57,6 +87,11 @@ def choose_backend(requested: str) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ['review']:
+        return review_main(argv[1:])
+    if argv[:1] == ['recover']:
+        return recover_main(argv[1:])
     args = parse_args(argv)
     try:
         params, disturbances = load_vehicle_file(args.vehicle)
@@ -68,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         duration = trajectory.duration if args.duration is None else args.duration
         physics_rate = check_number('--physics-rate', args.physics_rate, 0.0, low_inclusive=False)
         settle_time = check_number('--settle-time', args.settle_time, 0.0)
+        topics = select_topics(args.topics)
     except ParameterError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
@@ -78,8 +114,22 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     print(f'flying {args.controller} on "{args.scenario}" for {duration:g} s '
           f'(disturbances {"on" if disturbances.enabled else "off"}), embedded backend')
-    result = fly_embedded(args.controller, trajectory, params, disturbances, gains, duration, physics_rate,
-                          progress=not args.quiet)
+    bag_path = None if args.no_bag else args.bag or out_dir / 'bag'
+    try:
+        with sigterm_as_interrupt():
+            recording = (FlightBag.create(bag_path, params, settle_time, topics=topics, overwrite=True,
+                                          controller=args.controller, scenario=args.scenario, backend=backend,
+                                          seed=args.seed)
+                         if bag_path else contextlib.nullcontext())
+            with recording as bag:
+                result = fly_embedded(args.controller, trajectory, params, disturbances, gains, duration,
+                                      physics_rate, progress=not args.quiet, bag=bag)
+    except KeyboardInterrupt:
+        print('interrupted' + (f'; bag closed: {bag_path}' if bag_path else ''), file=sys.stderr)
+        return 130
+    except BagWriteError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 1
     summary = build_summary(result.record, backend=backend, controller=args.controller, scenario=args.scenario,
                             seed=args.seed, settle_time=settle_time, params=params, disturbances=disturbances,
                             gains=gains, physics_rate=physics_rate, wall_time_s=result.wall_time_s,
@@ -87,6 +137,16 @@ def main(argv: list[str] | None = None) -> int:
     path = write_summary(summary, out_dir)
     print(format_summary(summary))
     print(f'summary: {path}')
+    if bag_path:
+        print(f'bag: {bag_path}')
+        try:
+            review = review_bags([bag_path], out_dir)
+        except ValueError as error:   # e.g. --topics left out what the metrics need
+            print(f'review skipped: {error}')
+        else:
+            for note in review.notes:
+                print(f'note: {note}')
+            print(f'report: {review.report}')
     return 0 if summary['flight_ok'] else 1
 
 

@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
+from quad_msgs_bridge.flight_bag import FlightBag
 from quad_msgs_bridge.metrics import FlightRecord, FlightRecorder
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.state import PSI, state_from_odometry
@@ -28,18 +29,26 @@ class FlightResult:
     steps: int
 
 
-def setpoint_path(trajectory, setpoint_rate: float) -> SetpointPath:
-    """The setpoints the trajectory node would publish, as the controller reads them back from the message."""
-    path = SetpointPath.sampled(trajectory, 0.0, trajectory.duration, setpoint_rate)
+def published_path(trajectory, setpoint_rate: float) -> SetpointPath:
+    """The setpoint path the trajectory node would publish."""
+    return SetpointPath.sampled(trajectory, 0.0, trajectory.duration, setpoint_rate)
+
+
+def setpoint_path(path: SetpointPath) -> SetpointPath:
+    """``path`` as the controller reads it back from the setpoints message."""
     return setpoints_from_msg(setpoints_msg(rosbags_kit(), path))
 
 
 def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, disturbances: Disturbances,
                  gains: dict, duration: float, physics_rate: float, setpoint_rate: float = 50.0,
-                 progress: bool = False) -> FlightResult:
-    """Fly ``trajectory`` for ``duration`` [s] of sim time; one record row per control step."""
+                 progress: bool = False, bag: FlightBag | None = None) -> FlightResult:
+    """Fly ``trajectory`` for ``duration`` [s] of sim time; one record row per control step.
+
+    With ``bag`` every step's contract messages are recorded too (the caller closes the bag).
+    """
     controller = build_controller(controller_kind, params, gains)
-    setpoints = setpoint_path(trajectory, setpoint_rate)
+    published = published_path(trajectory, setpoint_rate)
+    setpoints = setpoint_path(published)
     physics_dt = 1.0 / physics_rate
     substeps = round(controller.dt / physics_dt)
     if substeps < 1 or abs(substeps * physics_dt - controller.dt) > 1e-12:
@@ -50,6 +59,8 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     started = time.perf_counter()
+    if bag is not None:
+        bag.record_setpoints(published)
     for k in range(steps):
         odometry = simulator.odometry()
         t = odometry.stamp
@@ -58,9 +69,13 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
         out = controller.update(t, state, reference)
         simulator.set_forces(out.forces)
         axes = out.axes.values()
+        surfaces, equivalent, corrective = ([a.surface for a in axes], [a.equivalent for a in axes],
+                                            [a.corrective for a in axes])
         recorder.append(t, odometry.position, state[PSI], reference.position, reference.yaw,
-                        out.forces, out.controls, [a.surface for a in axes],
-                        [a.equivalent for a in axes], [a.corrective for a in axes])
+                        out.forces, out.controls, surfaces, equivalent, corrective)
+        if bag is not None:
+            bag.record_step(odometry, out.forces, out.controls, reference.position, reference.yaw,
+                            surfaces, equivalent, corrective)
         simulator.advance(substeps)
         if progress and (k + 1) % report_every == 0:
             print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)

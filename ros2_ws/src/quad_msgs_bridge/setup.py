@@ -20,8 +20,10 @@ setup(
     maintainer_email='maintainers@nnit2fsmc.invalid',
     description="The NNIT2FSMC stack's contract: topic names, QoS, frames, message and numpy conversions, the vehicle description, MCAP bag writing, reading and review.",
     license='Apache-2.0',
-    extras_require={'test': ['pytest']},
+    extras_require={'test': ['pytest'], 'plots': ['matplotlib']},
     entry_points={'console_scripts': [
         'record = quad_msgs_bridge.recorder_node:main',
+        'review = quad_msgs_bridge.review:main',
+        'recover = quad_msgs_bridge.bag_recover:recover_main',
     ]},
 )

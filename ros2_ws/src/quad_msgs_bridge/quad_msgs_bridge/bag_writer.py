@@ -1,0 +1,213 @@
+"""The recorder's writer: a rosbag2 bag (MCAP storage) of contract topics, from serialized messages.
+
+``BagWriter(path, topics)`` creates the bag directory, the MCAP file (profile ``ros2``, schemas
+``ros2msg`` with the full message definition, channels ``cdr`` with offered QoS and RIHS01 type
+hash) and a first ``metadata.yaml``, so even a killed recording is a recognisable bag (see
+``recover``). Messages arrive as CDR bytes with their log (receive) and publish times [ns]:
+
+* the embedded backend writes them synchronously, stamped with sim time;
+* a ROS recorder can pass ``queue_size``: :meth:`write_serialized` then only enqueues (never
+  waits on the disk; a full queue drops the message and counts it) and a writer thread writes.
+
+:meth:`close` writes the summary and the final ``metadata.yaml`` (counts, times). Message
+definitions and type hashes come from the ``rosbags`` ROS 2 Jazzy typestore, whose RIHS01 hashes
+equal those of the ROS 2 Jazzy interface packages (tested against their ``.json`` files).
+"""
+from __future__ import annotations
+
+import errno
+import queue
+import threading
+from pathlib import Path
+from typing import Mapping, Sequence
+
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+
+from .bag_metadata import (CUSTOM_DATA_RECORD, METADATA_FILE, ROS_DISTRO, TopicEntry, bagfile_information,
+                           channel_metadata, information_yaml, offered_qos_profiles, write_metadata)
+from .contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, TopicSpec, resolve
+from .mcap_file import DEFAULT_CHUNK_SIZE, BagWriteError, McapFileWriter
+
+_STOP = None
+
+
+def jazzy_typestore() -> Typestore:
+    """The ``rosbags`` ROS 2 Jazzy typestore: message definitions, RIHS01 hashes, CDR."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _prepare_directory(path: Path, overwrite: bool) -> None:
+    """Create the bag directory; an existing one must be empty, or a bag when ``overwrite``."""
+    try:
+        if path.exists():
+            if not path.is_dir():
+                raise BagWriteError(errno.EEXIST, 'bag path exists and is not a directory', str(path))
+            entries = list(path.iterdir())
+            is_bag = all(e.name == METADATA_FILE or e.suffix == '.mcap' for e in entries)
+            if entries and not (overwrite and is_bag):
+                raise BagWriteError(errno.EEXIST, 'bag directory exists and is not empty'
+                                    + ('' if is_bag else ' (nor a bag)'), str(path))
+            for entry in entries:
+                entry.unlink()
+        path.mkdir(parents=True, exist_ok=True)
+    except BagWriteError:
+        raise
+    except OSError as error:
+        raise BagWriteError(error.errno, f'cannot create bag directory: {error.strerror}', str(path)) from error
+
+
+def bag_information(file: McapFileWriter, topics: Sequence[TopicEntry], channel_ids: Sequence[int],
+                    custom_data: Mapping[str, str]) -> dict:
+    """Bag information for the chunks ``file`` has written; ``channel_ids[i]`` records ``topics[i]``."""
+    counts = file.message_counts()
+    start, end = file.time_range()
+    return bagfile_information(file.path.name, topics, [counts.get(c, 0) for c in channel_ids], start, end,
+                               custom_data)
+
+
+def write_bag_metadata(bag_dir: Path, information: dict) -> None:
+    try:
+        write_metadata(bag_dir, information)
+    except OSError as error:
+        raise BagWriteError(error.errno, f'cannot write bag metadata: {error.strerror}',
+                            str(bag_dir / METADATA_FILE)) from error
+
+
+def finish_bag(file: McapFileWriter, bag_dir: Path | None, topics: Sequence[TopicEntry],
+               channel_ids: Sequence[int], custom_data: Mapping[str, str]) -> dict:
+    """Finalize a bag: the open chunk, a ``rosbag2`` metadata record (as rosbag2 writes it), the MCAP
+    summary, then ``metadata.yaml`` in ``bag_dir`` (None: a lone MCAP file). Returns the bag information."""
+    file.write_open_chunk()
+    information = bag_information(file, topics, channel_ids, custom_data)
+    file.add_metadata('rosbag2', {'serialized_metadata': information_yaml(information), 'ROS_DISTRO': ROS_DISTRO})
+    file.close()
+    if bag_dir is not None:
+        write_bag_metadata(bag_dir, information)
+    return information
+
+
+class BagWriter:
+    """A rosbag2 bag (directory, ``metadata.yaml``, one MCAP file) being recorded."""
+
+    def __init__(self, path: str | Path, topics: Sequence[TopicSpec] = RECORDED_TOPICS,
+                 namespace: str = DEFAULT_NAMESPACE, *, custom_data: Mapping[str, str] | None = None,
+                 overwrite: bool = False, chunk_size: int = DEFAULT_CHUNK_SIZE, queue_size: int = 0):
+        self.path = Path(path)
+        self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
+        self.typestore = jazzy_typestore()
+        self.dropped = 0
+        self.closed = False
+        _prepare_directory(self.path, overwrite)
+        self._file = McapFileWriter(self.path / f'{self.path.resolve().name}_0.mcap', profile='ros2',
+                                    chunk_size=chunk_size)
+        self.topics: list[TopicEntry] = []
+        self._types: dict[str, str] = {}
+        self._channels: dict[str, int] = {}
+        schemas: dict[str, int] = {}
+        for spec in topics:
+            name = resolve(spec, namespace)
+            if name in self._channels:
+                continue
+            entry = TopicEntry(name, spec.type, offered_qos_profiles(spec.qos), self.typestore.hash_rihs01(spec.type))
+            if spec.type not in schemas:
+                msgdef, _ = self.typestore.generate_msgdef(spec.type, ros_version=2)
+                schemas[spec.type] = self._file.add_schema(spec.type, 'ros2msg', msgdef.encode())
+            self._channels[name] = self._file.add_channel(name, 'cdr', schemas[spec.type], channel_metadata(entry))
+            self._types[name] = spec.type
+            self.topics.append(entry)
+        if self.custom_data:
+            self._file.add_metadata(CUSTOM_DATA_RECORD, self.custom_data)
+        self._file.flush()
+        write_bag_metadata(self.path, bag_information(self._file, self.topics, list(self._channels.values()),
+                                                      self.custom_data))
+        self._error: BagWriteError | None = None
+        self._queue: queue.Queue | None = None
+        if queue_size > 0:
+            self._queue = queue.Queue(maxsize=queue_size)
+            self._thread = threading.Thread(target=self._drain, name=f'bag writer {self.path.name}', daemon=True)
+            self._thread.start()
+
+    # --- writing ----------------------------------------------------------------------------
+    def topic_names(self) -> list[str]:
+        return list(self._channels)
+
+    def write_serialized(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        """Record CDR bytes of ``topic`` (absolute name) received at ``log_time_ns``.
+
+        ``publish_time_ns`` defaults to the log time. With a queue this never blocks: if the
+        queue is full the message is dropped and counted in :attr:`dropped`.
+        """
+        channel = self._channels.get(topic)
+        if channel is None or self.closed:
+            raise ValueError(f'bag {self.path} is closed' if self.closed else
+                             f'topic {topic} is not recorded in bag {self.path} (topics: {", ".join(self._channels)})')
+        publish = log_time_ns if publish_time_ns is None else publish_time_ns
+        if self._queue is None:
+            self._file.add_message(channel, log_time_ns, publish, data)
+            return
+        if self._error is not None:
+            raise self._error
+        try:
+            self._queue.put_nowait((channel, log_time_ns, publish, data))
+        except queue.Full:
+            self.dropped += 1
+
+    def write_message(self, topic: str, msg, log_time_ns: int, publish_time_ns: int | None = None) -> None:
+        """Record a ``rosbags`` message object (serialized here with the typestore)."""
+        self.write_serialized(topic, self.typestore.serialize_cdr(msg, self._types[topic]), log_time_ns,
+                              publish_time_ns)
+
+    def _drain(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is _STOP:
+                return
+            try:
+                self._file.add_message(*item)
+            except BagWriteError as error:
+                self._error = error
+                return
+
+    # --- closing ------------------------------------------------------------------------------
+    def _custom_data(self) -> dict[str, str]:
+        if not self.dropped:
+            return self.custom_data
+        return {**self.custom_data, 'dropped_messages': str(self.dropped)}
+
+    def _stop_thread(self) -> None:
+        if self._queue is None:
+            return
+        while self._thread.is_alive():
+            try:
+                self._queue.put(_STOP, timeout=0.1)
+                break
+            except queue.Full:
+                continue
+        self._thread.join()
+
+    def close(self) -> None:
+        """Finish the MCAP file and write the final ``metadata.yaml``. Idempotent.
+
+        Raises BagWriteError if the bag could not be written, also if that was reported before
+        (the MCAP file is then readable up to its last complete chunk; ``recover`` finalizes it).
+        """
+        if self.closed:
+            return
+        self.closed = True
+        self._stop_thread()
+        error = self._error or self._file.error
+        if error is not None:
+            raise error
+        finish_bag(self._file, self.path, self.topics, [self._channels[t.name] for t in self.topics],
+                   self._custom_data())
+
+    def __enter__(self) -> 'BagWriter':
+        return self
+
+    def __exit__(self, exc_type, exc, traceback) -> None:
+        try:
+            self.close()
+        except BagWriteError:
+            if not isinstance(exc, BagWriteError):   # the same failure is already on its way up
+                raise

@@ -1,0 +1,114 @@
+"""Recording a flight computed in-process (embedded backend): the contract topics, one step at a time.
+
+Per control step the bag gets what the ROS flight publishes, in the same order and with the same
+sim-time stamps: ``/clock`` and ``odom`` (simulator), then ``rotor_forces``, ``control/wrench``,
+``control/reference`` and ``control/diagnostics`` (controller). Every message of a step is logged
+at that step's odometry stamp [ns]; ``setpoints`` and ``reference_path`` once, at the path start.
+The run's vehicle parameters and settings go into the bag's custom data, so a review finds the arm
+length and the rotor limits without the vehicle file.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Sequence
+
+from .bag_writer import BagWriter
+from .contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, DEFAULT_NAMESPACE, ODOM,
+                       RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, TopicSpec, resolve)
+from .conversions import path_msg, rosbags_kit, setpoints_msg
+from .fast_cdr import (clock_encoder, diagnostics_encoder, odometry_encoder, pose_stamped_encoder,
+                       rotor_forces_encoder, wrench_encoder)
+from .reference import SetpointPath
+from .state import OdometrySample
+from .timebase import NANOSECONDS_PER_SECOND, nanoseconds
+from .vehicle_params import ParameterError, VehicleParams
+
+
+def select_topics(names: Sequence[str] | None) -> tuple[TopicSpec, ...]:
+    """The recorded contract topics with these names (as in the contract: 'odom', '/clock'); None: all."""
+    if names is None:
+        return RECORDED_TOPICS
+    by_name = {spec.name: spec for spec in RECORDED_TOPICS}
+    unknown = [name for name in names if name not in by_name]
+    if unknown:
+        raise ParameterError(f'topics: {unknown[0]!r} is not a recorded contract topic (valid: {", ".join(by_name)})')
+    return tuple(by_name[name] for name in dict.fromkeys(names))
+
+
+def flight_custom_data(params: VehicleParams, settle_time: float, **info) -> dict[str, str]:
+    """Bag custom data of a flight: vehicle parameters (JSON), settle time [s] and labels (controller, ...)."""
+    return {'vehicle': json.dumps(dataclasses.asdict(params)), 'settle_time_s': repr(float(settle_time)),
+            **{key: str(value) for key, value in info.items()}}
+
+
+class FlightBag:
+    """A bag fed by the embedded flight loop; a context manager that closes the bag."""
+
+    def __init__(self, writer: BagWriter, arm_length: float, namespace: str = DEFAULT_NAMESPACE):
+        self.writer = writer
+        recorded = set(writer.topic_names())
+
+        def name(spec: TopicSpec) -> str | None:
+            topic = resolve(spec, namespace)
+            return topic if topic in recorded else None
+
+        self._clock, self._odom, self._forces = name(CLOCK), name(ODOM), name(ROTOR_FORCES)
+        self._wrench, self._reference, self._diagnostics = name(CONTROL_WRENCH), name(CONTROL_REFERENCE), \
+            name(CONTROL_DIAGNOSTICS)
+        self._setpoints, self._path = name(SETPOINTS), name(REFERENCE_PATH)
+        self._encode_clock = clock_encoder()
+        self._encode_odometry = odometry_encoder()
+        self._encode_forces = rotor_forces_encoder()
+        self._encode_wrench = wrench_encoder(arm_length)
+        self._encode_pose = pose_stamped_encoder()
+        self._encode_diagnostics = diagnostics_encoder()
+
+    @classmethod
+    def create(cls, path: str | Path, params: VehicleParams, settle_time: float, *,
+               topics: Sequence[TopicSpec] = RECORDED_TOPICS, namespace: str = DEFAULT_NAMESPACE,
+               overwrite: bool = False, **info) -> 'FlightBag':
+        """A new bag at ``path`` for a flight of the vehicle ``params``; ``info`` labels the run."""
+        custom_data = flight_custom_data(params, settle_time, namespace=namespace, **info)
+        writer = BagWriter(path, topics, namespace, custom_data=custom_data, overwrite=overwrite)
+        return cls(writer, params.d, namespace)
+
+    def record_setpoints(self, path: SetpointPath) -> None:
+        """The trajectory node's ``setpoints`` and ``reference_path`` for ``path``, at its start stamp."""
+        kit = rosbags_kit()
+        stamp = nanoseconds(path.start)
+        if self._setpoints:
+            self.writer.write_message(self._setpoints, setpoints_msg(kit, path), stamp)
+        if self._path:
+            self.writer.write_message(self._path, path_msg(kit, path), stamp)
+
+    def record_step(self, odometry: OdometrySample, forces: Sequence[float], controls: Sequence[float],
+                    reference_position: Sequence[float], reference_yaw: float, surfaces: Sequence[float],
+                    equivalent: Sequence[float], corrective: Sequence[float]) -> None:
+        """One control step: the odometry answered, the thrusts [N] and U1..U4 sent, the reference
+        [m, rad] used and the per-subsystem sliding surfaces, NN and fuzzy terms."""
+        stamp = nanoseconds(odometry.stamp)
+        sec, nanosec = divmod(stamp, NANOSECONDS_PER_SECOND)
+        write = self.writer.write_serialized
+        if self._clock:
+            write(self._clock, self._encode_clock(sec, nanosec), stamp)
+        if self._odom:
+            write(self._odom, self._encode_odometry(sec, nanosec, odometry), stamp)
+        if self._forces:
+            write(self._forces, self._encode_forces(forces), stamp)
+        if self._wrench:
+            write(self._wrench, self._encode_wrench(sec, nanosec, controls), stamp)
+        if self._reference:
+            write(self._reference, self._encode_pose(sec, nanosec, reference_position, reference_yaw), stamp)
+        if self._diagnostics:
+            write(self._diagnostics, self._encode_diagnostics(surfaces, equivalent, corrective), stamp)
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def __enter__(self) -> 'FlightBag':
+        return self
+
+    def __exit__(self, exc_type, exc, traceback) -> None:
+        self.writer.__exit__(exc_type, exc, traceback)

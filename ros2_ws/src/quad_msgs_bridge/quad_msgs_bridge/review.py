@@ -1,0 +1,101 @@
+"""``review BAG [--compare BAG2 ...]``: a recorded flight as numbers and pictures.
+
+Reads any bag with the contract topics (see :mod:`quad_msgs_bridge.flight_from_bag`), computes the
+metrics of ``summary.json`` with the same function as the live summary
+(:func:`quad_msgs_bridge.metrics.flight_metrics`), prints them, and writes into the output folder
+``review.json``, the plots (``plots/*.png``, needs matplotlib) and a one-page report
+(``report.html`` and ``report.md``). With ``--compare`` the flights are overlaid in every plot and
+tabulated side by side.
+
+Run as ``ros2 run quad_msgs_bridge review BAG`` or, without ROS, ``python3 -m quad_msgs_bridge.review BAG``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+from .flight_from_bag import BagFlight, read_flight
+from .metrics import flight_metrics
+from .plots import plot_flights
+from .report import text_table, write_html, write_markdown
+
+PLOT_HINT = ('plots skipped: matplotlib is not installed (pip install matplotlib, '
+             'or sudo apt install python3-matplotlib)')
+
+
+@dataclass
+class Review:
+    flights: list[BagFlight]
+    metrics: list[dict]
+    out_dir: Path
+    report: Path                      #: report.html
+    plots: list[Path] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+
+
+def _unique_labels(flights: Sequence[BagFlight]) -> list[str]:
+    labels = [f.label for f in flights]
+    return [f'{label} ({f.path.name})' if labels.count(label) > 1 else label for label, f in zip(labels, flights)]
+
+
+def review_bags(bags: Sequence[str | Path], out_dir: str | Path, *, namespace: str | None = None,
+                vehicle_file: str | Path | None = None, settle_time: float | None = None,
+                plots: bool = True) -> Review:
+    """Metrics, plots and report of ``bags`` (several: compared) into ``out_dir``."""
+    out_dir = Path(out_dir)
+    flights = [read_flight(bag, namespace=namespace, vehicle_file=vehicle_file, settle_time=settle_time)
+               for bag in bags]
+    for flight, label in zip(flights, _unique_labels(flights)):
+        flight.label = label
+    metrics = [flight_metrics(f.record, f.settle_time, f.params.F_min, f.params.F_max) for f in flights]
+    notes = [f'{f.label}: {warning}' for f in flights for warning in f.warnings]
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / 'review.json').write_text(json.dumps(
+        [{'label': f.label, 'bag': str(f.path), **m} for f, m in zip(flights, metrics)], indent=2) + '\n')
+    plot_paths: list[Path] = []
+    if plots:
+        try:
+            plot_paths = plot_flights(flights, out_dir / 'plots')
+        except ImportError:
+            notes.append(PLOT_HINT)
+    named = [(f.label, f.path) for f in flights]
+    write_markdown(out_dir / 'report.md', named, metrics, plot_paths, notes)
+    report = write_html(out_dir / 'report.html', named, metrics, plot_paths, notes)
+    return Review(flights, metrics, out_dir, report, plot_paths, notes)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog='review', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('bag', type=Path, help='bag directory (rosbag2, MCAP or sqlite3) or .mcap file')
+    parser.add_argument('--compare', type=Path, nargs='+', default=[], metavar='BAG',
+                        help='more bags to overlay and tabulate next to the first')
+    parser.add_argument('--out', type=Path, default=None, help='output folder (default: BAG-review next to BAG)')
+    parser.add_argument('--vehicle', type=Path, default=None,
+                        help='vehicle YAML for bags without vehicle parameters (default: the packaged one)')
+    parser.add_argument('--settle-time', type=float, default=None,
+                        help='metrics ignore the first S seconds (default: as recorded, else 5)')
+    parser.add_argument('--namespace', default=None, help='vehicle namespace of the topics (default: found)')
+    parser.add_argument('--no-plots', action='store_true', help='metrics and report only')
+    args = parser.parse_args(argv)
+    out_dir = args.out or args.bag.parent / f'{args.bag.name}-review'
+    try:
+        result = review_bags([args.bag, *args.compare], out_dir, namespace=args.namespace,
+                             vehicle_file=args.vehicle, settle_time=args.settle_time, plots=not args.no_plots)
+    except (ValueError, OSError) as error:   # BagReadError, ParameterError, too short a flight
+        print(f'error: {error}', file=sys.stderr)
+        return 1
+    print(text_table([f.label for f in result.flights], result.metrics))
+    for note in result.notes:
+        print(f'note: {note}')
+    print(f'report: {result.report}' + (f' ({len(result.plots)} plots in {result.plots[0].parent})'
+                                         if result.plots else ''))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

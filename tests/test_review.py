@@ -1,0 +1,134 @@
+"""`review`: the metrics of a recorded bag equal the live summary of the same flight; plots, report,
+--compare, bags written by other tools, and what happens without matplotlib or without the topics."""
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
+
+import run_stack
+from bag_support import PARAMS, SETTLE_TIME, fly_recorded
+from quad_msgs_bridge.bag_reader import BagReadError
+from quad_msgs_bridge.bag_writer import jazzy_typestore
+from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM,
+                                       ROTOR_FORCES, resolve)
+from quad_msgs_bridge.conversions import (clock_msg, diagnostics_msg, odometry_msg, pose_stamped_msg, rosbags_kit,
+                                          rotor_forces_msg, wrench_msg)
+from quad_msgs_bridge.review import PLOT_HINT, main as review_main, review_bags
+
+ROOT = Path(__file__).resolve().parent.parent
+PLOTS = {'path_3d.png', 'tracking.png', 'controls.png', 'controls_zoom.png', 'surfaces.png', 'fuzzy_share.png'}
+
+
+def assert_same_metrics(actual: dict, expected: dict, tolerance: float = 1e-9) -> None:
+    """Every metric of ``expected`` equals the one in ``actual`` (floats within a relative ``tolerance``)."""
+    for key, value in expected.items():
+        if isinstance(value, dict):
+            assert set(actual[key]) == set(value), key
+            assert_same_metrics(actual[key], value, tolerance)
+        elif isinstance(value, list):
+            assert actual[key] == pytest.approx(value, rel=tolerance, abs=1e-15), key
+        elif isinstance(value, float):
+            assert actual[key] == pytest.approx(value, rel=tolerance, abs=1e-15), key
+        else:
+            assert actual[key] == value, key
+
+
+@pytest.fixture(scope='module')
+def flights(tmp_path_factory):
+    base = tmp_path_factory.mktemp('review')
+    return {kind: fly_recorded(base / kind, duration=2.0, controller=kind) for kind in ('nnit2fsmc', 'smc-sign')}
+
+
+def test_the_main_job_writes_bag_and_report_whose_metrics_equal_the_live_summary(tmp_path, capsys):
+    status = run_stack.main(['--backend', 'embedded', '--duration', '6', '--out', str(tmp_path), '--quiet'])
+    assert status == 0
+    out = capsys.readouterr().out
+    assert f'bag: {tmp_path / "bag"}' in out and f'report: {tmp_path / "report.html"}' in out
+    summary = json.loads((tmp_path / 'summary.json').read_text())
+    [reviewed] = json.loads((tmp_path / 'review.json').read_text())
+    assert reviewed['control_steps'] == 6000
+    metrics = {key: value for key, value in reviewed.items() if key not in ('label', 'bag')}
+    assert_same_metrics(metrics, {key: summary[key] for key in metrics})
+    assert {p.name for p in (tmp_path / 'plots').glob('*.png')} == PLOTS
+    assert (tmp_path / 'report.md').read_text().count('![') == len(PLOTS)
+
+
+def test_compare_overlays_and_tabulates_several_flights(flights, tmp_path):
+    out = tmp_path / 'compare'
+    result = subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), 'review', str(flights['nnit2fsmc'].bag),
+                             '--compare', str(flights['smc-sign'].bag), '--out', str(out)],
+                            cwd=ROOT, capture_output=True, text=True, check=True)
+    assert 'nnit2fsmc' in result.stdout and 'smc-sign' in result.stdout and 'chattering U1' in result.stdout
+    reviewed = json.loads((out / 'review.json').read_text())
+    assert [r['label'] for r in reviewed] == ['nnit2fsmc', 'smc-sign']
+    for entry, kind in zip(reviewed, ('nnit2fsmc', 'smc-sign')):
+        assert_same_metrics(entry, flights[kind].metrics)
+    page = (out / 'report.html').read_text()
+    assert page.count('<img') == len(PLOTS) and 'smc-sign' in page
+    assert {p.name for p in (out / 'plots').glob('*.png')} == PLOTS
+
+
+def test_review_runs_as_a_module(flights, tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT / 'ros2_ws' / 'src' / 'quad_msgs_bridge'))
+    result = subprocess.run([sys.executable, '-m', 'quad_msgs_bridge.review', str(flights['nnit2fsmc'].bag),
+                             '--no-plots', '--out', str(tmp_path)], capture_output=True, text=True, env=env,
+                            check=True)
+    assert 'position RMSE' in result.stdout
+    assert not (tmp_path / 'plots').exists()
+
+
+def test_without_matplotlib_review_prints_the_metrics_and_how_to_get_plots(flights, tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, 'matplotlib', None)    # import matplotlib now raises ImportError
+    assert review_main([str(flights['nnit2fsmc'].bag), '--out', str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert 'position RMSE' in out and PLOT_HINT in out
+    assert not list(tmp_path.glob('plots/*.png'))
+    assert PLOT_HINT in (tmp_path / 'report.md').read_text()
+
+
+def write_foreign_bag(flight, path: Path, namespace: str) -> None:
+    """The flight's messages as another tool records them: rosbags' own rosbag2 writer, the conversions'
+    messages and rosbags' serializer, another namespace, no custom data (no vehicle parameters)."""
+    kit, typestore = rosbags_kit(), jazzy_typestore()
+    writer = Writer(path, version=9, storage_plugin=StoragePlugin.MCAP)
+    with writer:
+        topics = (CLOCK, ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS)
+        connections = {t: writer.add_connection(resolve(t, namespace), t.type, typestore=typestore) for t in topics}
+        for odometry, forces, controls, position, yaw, surfaces, equivalent, corrective in flight.published.steps:
+            t = odometry.stamp
+            stamp = round(t * 1e9) + 123   # a receive time: a little after the stamp
+            messages = {CLOCK: clock_msg(kit, t),
+                        ODOM: odometry_msg(kit, odometry), ROTOR_FORCES: rotor_forces_msg(kit, forces),
+                        CONTROL_WRENCH: wrench_msg(kit, t, controls, PARAMS.d),
+                        CONTROL_REFERENCE: pose_stamped_msg(kit, t, position, yaw),
+                        CONTROL_DIAGNOSTICS: diagnostics_msg(kit, surfaces, equivalent, corrective)}
+            for topic, msg in messages.items():
+                writer.write(connections[topic], stamp, typestore.serialize_cdr(msg, topic.type))
+
+
+def test_a_bag_recorded_by_another_tool_gives_the_same_metrics(flights, tmp_path):
+    flight = flights['nnit2fsmc']
+    write_foreign_bag(flight, tmp_path / 'foreign', 'uav7')
+    review = review_bags([tmp_path / 'foreign'], tmp_path / 'out', settle_time=SETTLE_TIME, plots=False)
+    assert any('packaged vehicle file' in note for note in review.notes)
+    assert_same_metrics(review.metrics[0], flight.metrics)
+
+
+def test_missing_topics_are_named(tmp_path):
+    flight = fly_recorded(tmp_path / 'bag', duration=1.2, topics=(ODOM, CLOCK))
+    with pytest.raises(BagReadError, match='no rotor_forces, control/wrench, control/reference'):
+        review_bags([flight.bag], tmp_path / 'out', plots=False)
+
+
+def test_an_unfinished_bag_is_sent_to_recover(flights, tmp_path):
+    bag = tmp_path / 'bag'
+    shutil.copytree(flights['nnit2fsmc'].bag, bag)
+    storage = next(bag.glob('*.mcap'))
+    os.truncate(storage, storage.stat().st_size // 2)
+    with pytest.raises(BagReadError, match='recover'):
+        review_bags([bag], tmp_path / 'out', plots=False)
