@@ -20,16 +20,20 @@ import argparse
 import contextlib
 import signal
 import sys
+import tempfile
 from pathlib import Path
 
 import flight_stack  # noqa: F401  (puts the three ROS package folders on the path)
 from flight_stack.embedded import fly_embedded
+from flight_stack.ros_backend import RosFlightConfig, fly_ros
 from flight_stack.summary import build_summary, format_summary, write_summary
-from nnit2fsmc_controller.factory import CONTROLLERS, load_gains
+from nnit2fsmc_controller.factory import CONTROLLERS, control_period, load_gains
 from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
 from quad_msgs_bridge.bag_recover import recover_main
-from quad_msgs_bridge.contract import RECORDED_TOPICS
+from quad_msgs_bridge.bag_timing import message_timing
+from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS
 from quad_msgs_bridge.flight_bag import FlightBag, select_topics
+from quad_msgs_bridge.flight_from_bag import read_flight
 from quad_msgs_bridge.mcap_file import BagWriteError
 from quad_msgs_bridge.review import main as review_main, review_bags
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number, load_vehicle_file
@@ -53,6 +57,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--max-error', type=float, default=1.0,
                         help='the flight fails if the position error after settling exceeds this [m]')
     parser.add_argument('--quiet', action='store_true', help='no progress lines')
+    parser.add_argument('--namespace', default=DEFAULT_NAMESPACE, help='ROS backend: namespace of the vehicle')
+    parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
+                        help='ROS backend: lockstep (deterministic) or realtime simulation')
+    parser.add_argument('--speed-factor', type=float, default=1.0, help='ROS backend, realtime: sim s per wall s')
     parser.add_argument('--bag', type=Path, default=None,
                         help='record the flight into this rosbag2 (MCAP) folder (default OUT/bag); '
                              'then review it into OUT (report.html, plots/)')
@@ -86,6 +94,30 @@ def choose_backend(requested: str) -> str:
     return 'ros'
 
 
+def fly_on_ros(args, trajectory, duration: float, disturbances: bool, physics_rate: float, gains: dict,
+               settle_time: float, topics, bag_path: Path):
+    """Fly with every node in its own process; (record, wall time, summary extras) read from the bag, or an exit code."""
+    result = fly_ros(RosFlightConfig(
+        namespace=args.namespace, controller=args.controller, scenario=args.scenario, duration=duration,
+        disturbances=disturbances, seed=args.seed, physics_rate=physics_rate,
+        control_rate=1.0 / control_period(gains), initial_state=trajectory.initial_state, bag=bag_path,
+        topics=[t.name for t in topics], mode=args.mode, speed_factor=args.speed_factor,
+        vehicle_file=args.vehicle, gains_file=args.gains, settle_time=settle_time, quiet=args.quiet))
+    if result.failed_node:
+        print(f'error: the flight failed: {result.failed_node} (exit codes {result.exit_codes}); '
+              f'the bag is closed: {bag_path}', file=sys.stderr)
+        return 130 if result.failed_node == 'interrupted' else 1
+    try:
+        flight = read_flight(bag_path, namespace=args.namespace, vehicle_file=args.vehicle, settle_time=settle_time)
+        timing = message_timing(bag_path, args.namespace)
+    except ValueError as error:
+        print(f'error: cannot summarise the flight from {bag_path}: {error}', file=sys.stderr)
+        return 1
+    return flight.record, result.wall_time_s, {'ros': {'namespace': args.namespace, 'mode': args.mode,
+                                                       'simulator': result.sim_report.split('] ')[-1],
+                                                       'timing': timing}}
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['review']:
@@ -104,38 +136,55 @@ def main(argv: list[str] | None = None) -> int:
         physics_rate = check_number('--physics-rate', args.physics_rate, 0.0, low_inclusive=False)
         settle_time = check_number('--settle-time', args.settle_time, 0.0)
         topics = select_topics(args.topics)
+        if duration <= settle_time:
+            raise ParameterError(f'--duration: {duration:g} s leaves nothing after the settling window '
+                                 f'(--settle-time {settle_time:g} s)')
     except ParameterError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
     backend = choose_backend(args.backend)
     out_dir = args.out or Path('out') / f'{args.scenario}-{args.controller}'
-    if backend == 'ros':
-        print('error: the ROS backend is not available in this build yet; use --backend embedded', file=sys.stderr)
-        return 2
-    print(f'flying {args.controller} on "{args.scenario}" for {duration:g} s '
-          f'(disturbances {"on" if disturbances.enabled else "off"}), embedded backend')
     bag_path = None if args.no_bag else args.bag or out_dir / 'bag'
-    try:
-        with sigterm_as_interrupt():
-            recording = (FlightBag.create(bag_path, params, settle_time, topics=topics, overwrite=True,
-                                          controller=args.controller, scenario=args.scenario, backend=backend,
-                                          seed=args.seed)
-                         if bag_path else contextlib.nullcontext())
-            with recording as bag:
-                result = fly_embedded(args.controller, trajectory, params, disturbances, gains, duration,
-                                      physics_rate, progress=not args.quiet, bag=bag)
-    except KeyboardInterrupt:
-        print('interrupted' + (f'; bag closed: {bag_path}' if bag_path else ''), file=sys.stderr)
-        return 130
-    except BagWriteError as error:
-        print(f'error: {error}', file=sys.stderr)
-        return 1
-    summary = build_summary(result.record, backend=backend, controller=args.controller, scenario=args.scenario,
+    print(f'flying {args.controller} on "{args.scenario}" for {duration:g} s '
+          f'(disturbances {"on" if disturbances.enabled else "off"}), {backend} backend')
+    extra = {}
+    if backend == 'ros':
+        with tempfile.TemporaryDirectory(prefix='nnit2fsmc-') as scratch:
+            flown = fly_on_ros(args, trajectory, duration, disturbances.enabled, physics_rate, gains,
+                               settle_time, topics, bag_path or Path(scratch) / 'bag')
+        if isinstance(flown, int):
+            return flown
+        record, wall_time_s, extra = flown
+    else:
+        try:
+            with sigterm_as_interrupt():
+                recording = (FlightBag.create(bag_path, params, settle_time, topics=topics, overwrite=True,
+                                              controller=args.controller, scenario=args.scenario, backend=backend,
+                                              seed=args.seed)
+                             if bag_path else contextlib.nullcontext())
+                with recording as bag:
+                    result = fly_embedded(args.controller, trajectory, params, disturbances, gains, duration,
+                                          physics_rate, progress=not args.quiet, bag=bag)
+        except KeyboardInterrupt:
+            print('interrupted' + (f'; bag closed: {bag_path}' if bag_path else ''), file=sys.stderr)
+            return 130
+        except BagWriteError as error:
+            print(f'error: {error}', file=sys.stderr)
+            return 1
+        record, wall_time_s = result.record, result.wall_time_s
+    summary = build_summary(record, backend=backend, controller=args.controller, scenario=args.scenario,
                             seed=args.seed, settle_time=settle_time, params=params, disturbances=disturbances,
-                            gains=gains, physics_rate=physics_rate, wall_time_s=result.wall_time_s,
+                            gains=gains, physics_rate=physics_rate, wall_time_s=wall_time_s,
                             max_error=args.max_error)
+    summary.update(extra)
     path = write_summary(summary, out_dir)
     print(format_summary(summary))
+    if 'ros' in summary:
+        print(f'  ROS: {summary["ros"]["simulator"]}')
+        timing = summary['ros'].get('timing', {})
+        if 'latency_median_ms' in timing:
+            print(f'  ROS: odometry at {timing["odometry_rate_hz"]:.1f} Hz, odom->forces latency median '
+                  f'{timing["latency_median_ms"]:.3f} ms, p99 {timing["latency_p99_ms"]:.3f} ms')
     print(f'summary: {path}')
     if bag_path:
         print(f'bag: {bag_path}')

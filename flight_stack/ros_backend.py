@@ -39,6 +39,7 @@ class RosFlightConfig:
     setpoint_rate: float = 50.0
     vehicle_file: Path | None = None
     gains_file: Path | None = None
+    settle_time: float = 5.0
     quiet: bool = False
     record: bool = True       #: False: no recorder process (for timing the bare three-node loop)
 
@@ -51,10 +52,8 @@ class RosFlightResult:
     sim_report: str
 
 
-def _ros_args(namespace: str, params: dict, params_file: Path | None = None) -> list[str]:
+def _ros_args(namespace: str, params: dict) -> list[str]:
     args = ['--ros-args', '-r', f'__ns:=/{namespace.strip("/")}']
-    if params_file is not None:
-        args += ['--params-file', str(params_file)]
     for name, value in params.items():
         if isinstance(value, bool):
             text = 'true' if value else 'false'
@@ -72,20 +71,20 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     vehicle = {'vehicle_file': str(config.vehicle_file)} if config.vehicle_file else {}
     nodes = [
         ('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.recorder_node',
-         {'bag': str(config.bag), 'topics': config.topics, 'controller': config.controller,
-          'scenario': config.scenario, **vehicle}, None),
+         {'bag': str(config.bag), 'overwrite': True, 'topics': config.topics, 'controller': config.controller,
+          'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time, **vehicle}),
         ('trajectory', 'nnit2fsmc_controller', 'trajectory', 'nnit2fsmc_controller.trajectory_node',
          {'use_sim_time': True, 'scenario': config.scenario, 'duration': config.duration,
-          'setpoint_rate': config.setpoint_rate, 'start_time': 0.0}, None),
+          'setpoint_rate': config.setpoint_rate, 'start_time': 0.0}),
         ('controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller.controller_node',
          {'use_sim_time': True, 'controller': config.controller, 'nnit2fsmc.seed': config.seed,
-          'latest_only': config.mode == 'realtime', **vehicle},
-         config.gains_file),
+          'latest_only': config.mode == 'realtime', **vehicle,
+          **({'gains_file': str(config.gains_file)} if config.gains_file else {})}),
         ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node',
          {'duration': config.duration, 'exit_at_end': True, 'disturbances': config.disturbances,
           'physics_rate': config.physics_rate, 'odometry_rate': config.control_rate, 'mode': config.mode,
           'speed_factor': config.speed_factor, 'wait_for_subscribers': 2 if config.record else 1,
-          'initial_state': config.initial_state, **vehicle}, None),
+          'initial_state': config.initial_state, **vehicle}),
     ]
     if not config.record:
         nodes = nodes[1:]
@@ -93,8 +92,8 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     started = time.monotonic()
     failed = None
     try:
-        for name, package, executable, module, params, params_file in nodes:
-            command = node_command(package, executable, module) + _ros_args(config.namespace, params, params_file)
+        for name, package, executable, module, params in nodes:
+            command = node_command(package, executable, module) + _ros_args(config.namespace, params)
             processes.append(NodeProcess(name, command, env, quiet=config.quiet))
         sim = processes[-1]
         # generous: start-up, discovery, and the flight at no less than a tenth of real time
@@ -105,7 +104,7 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
         elif sim.returncode != 0:
             failed = sim.name
         else:
-            time.sleep(0.5)   # let the last answers reach the recorder
+            time.sleep(0.2)   # let the last answers reach the recorder (it also drains when stopped)
     except (KeyboardInterrupt, TimeoutError) as stop:
         failed = 'interrupted' if isinstance(stop, KeyboardInterrupt) else f'timeout ({stop})'
     finally:

@@ -25,9 +25,10 @@ from rclpy.signals import SignalHandlerOptions
 from .bag_writer import BagWriter
 from .contract import CLOCK, ODOM, RECORDED_TOPICS, TopicSpec, resolve
 from .conversions import MessageKit, rclpy_kit
+from .flight_bag import flight_custom_data
 from .ros_helpers import declare, qos_profile
 from .timebase import NANOSECONDS_PER_SECOND
-from .vehicle_params import ParameterError
+from .vehicle_params import ParameterError, load_vehicle_file
 
 RECORD_DEPTH = 10000   #: reader history: the recorder never drops a message it was sent
 
@@ -38,8 +39,12 @@ class RecorderNode(Node):
         bag = declare(self, 'bag', '', 'bag directory to create (required)')
         names = declare(self, 'topics', [t.name for t in RECORDED_TOPICS], 'contract topics to record')
         queue_size = declare(self, 'queue_size', 100000, 'messages buffered for the writer thread', (1, 10 ** 7))
-        custom = {key: declare(self, key, '', f'{key} stored in the bag metadata')
-                  for key in ('controller', 'scenario', 'vehicle_file')}
+        overwrite = declare(self, 'overwrite', False, 'replace an existing bag at the same path')
+        labels = {key: declare(self, key, '', f'{key} stored in the bag metadata') for key in ('controller', 'scenario')}
+        seed = declare(self, 'seed', 0, 'NN seed of the flight, stored in the bag metadata', (0, 2 ** 31 - 1))
+        settle_time = declare(self, 'settle_time', 5.0, 'metrics settling window stored in the bag [s]', (0.0, 1e6))
+        vehicle_file = declare(self, 'vehicle_file', '', 'vehicle YAML of the flight; empty: the packaged one')
+        params, _ = load_vehicle_file(vehicle_file or None)
         if not bag:
             raise ParameterError('parameter bag: a bag directory is required')
         known = {t.name: t for t in RECORDED_TOPICS}
@@ -48,7 +53,9 @@ class RecorderNode(Node):
             raise ParameterError(f'parameter topics: {unknown} are not contract topics ({", ".join(known)})')
         self.topics = [known[n] for n in names]
         namespace = self.get_namespace()
-        self.writer = BagWriter(bag, self.topics, namespace, custom_data={k: v for k, v in custom.items() if v},
+        custom = flight_custom_data(params, settle_time, backend='ros', seed=seed,
+                                    **{k: v for k, v in labels.items() if v})
+        self.writer = BagWriter(bag, self.topics, namespace, custom_data=custom, overwrite=overwrite,
                                 queue_size=queue_size)
         self.kit = kit
         self.clock_ns: int | None = None
