@@ -19,7 +19,7 @@ from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.model import QuadrotorModel
 from quad_sim.simulator import Simulator
-from nnit2fsmc_controller.factory import build_controller, control_period
+from nnit2fsmc_controller.factory import build_controller
 
 
 @dataclass

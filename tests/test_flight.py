@@ -83,7 +83,7 @@ def test_nnit2fsmc_tracks_the_paper_helix_under_disturbances(paper_flights):
 def test_nnit2fsmc_removes_the_chattering_of_sign_smc(paper_flights):
     """The paper's central claim: same sliding surfaces, >= 10x less total variation of U1..U4,
     at a position RMSE no worse than 1.2x that of the classic sign-SMC (thresholds of the issue)."""
-    (nn_record, nn), (sign_record, sign) = paper_flights['nnit2fsmc'], paper_flights['smc-sign']
+    (_, nn), (sign_record, sign) = paper_flights['nnit2fsmc'], paper_flights['smc-sign']
     assert_physical(sign_record)
     for control in ('U1', 'U2', 'U3', 'U4'):
         assert sign['chattering'][control] >= 10.0 * nn['chattering'][control], control

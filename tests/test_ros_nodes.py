@@ -2,14 +2,13 @@
 from __future__ import annotations
 
 import math
-import shutil
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from ros_support import HAVE_RCLPY, ROOT, node_process, requires_ros, spin_until
+from ros_support import HAVE_RCLPY, node_process, requires_ros, spin_until
 
 pytestmark = [requires_ros, pytest.mark.ros]
 

@@ -14,20 +14,20 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import replace
 
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
                                        ROTOR_FORCES, SETPOINTS)
-from quad_msgs_bridge.conversions import (MessageKit, diagnostics_msg, goal_from_msg, odometry_from_msg,
-                                          pose_stamped_msg, rotor_forces_msg, setpoints_from_msg, wrench_msg)
+from quad_msgs_bridge.conversions import MessageKit, goal_from_msg, setpoints_from_msg
+from quad_msgs_bridge.fast_cdr import (decode_odometry, diagnostics_encoder, pose_stamped_encoder, rotor_forces_encoder,
+                                       wrench_encoder)
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.reference import SetpointPath
-from quad_msgs_bridge.ros_helpers import declare, publisher, qos_profile, run_node, subscription
+from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
 from quad_msgs_bridge.state import PSI, state_from_odometry
-from quad_msgs_bridge.timebase import nanoseconds
+from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .factory import CONTROLLERS, build_controller, flatten_gains, gain_description, load_gains, unflatten_gains
@@ -65,11 +65,13 @@ class ControllerNode(Node):
         self.wrench_pub = publisher(self, kit, CONTROL_WRENCH)
         self.reference_pub = publisher(self, kit, CONTROL_REFERENCE)
         self.diagnostics_pub = publisher(self, kit, CONTROL_DIAGNOSTICS)
-        if latest_only:   # realtime: a controller that falls behind skips to the newest odometry
-            self.create_subscription(kit[ODOM.type], ODOM.name, self.on_odometry,
-                                     qos_profile(replace(ODOM.qos, depth=1)))
-        else:
-            subscription(self, kit, ODOM, self.on_odometry)
+        # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs;
+        # in realtime (latest_only) a controller that falls behind skips to the newest odometry
+        self.encode_forces = rotor_forces_encoder()
+        self.encode_wrench = wrench_encoder(self.params.d)
+        self.encode_reference = pose_stamped_encoder()
+        self.encode_diagnostics = diagnostics_encoder()
+        subscription(self, kit, ODOM, self.on_odometry, raw=True, depth=1 if latest_only else None)
         subscription(self, kit, SETPOINTS, self.on_setpoints)
         subscription(self, kit, GOAL_POSE, self.on_goal)
         self.path: SetpointPath | None = None
@@ -84,13 +86,13 @@ class ControllerNode(Node):
         self.get_logger().info(f'{kind} controller ready at {1.0 / self.controller.dt:g} Hz')
 
     def publish_forces(self, forces) -> None:
-        self.forces_pub.publish(rotor_forces_msg(self.kit, forces))
+        self.forces_pub.publish(self.encode_forces(forces))
 
-    def on_odometry(self, msg) -> None:
+    def on_odometry(self, data: bytes) -> None:
         self.last_odom_wall = time.monotonic()
         self.odom_stale = False
         try:
-            sample = odometry_from_msg(msg)
+            sample = decode_odometry(data)
             state = state_from_odometry(sample)
         except ValueError as error:
             self.get_logger().error(f'rejected odometry: {error}; holding the last forces', throttle_duration_sec=1.0)
@@ -116,15 +118,20 @@ class ControllerNode(Node):
                                     throttle_duration_sec=1.0)
             self.publish_forces(self.last_forces)
             return
+        if not all(map(math.isfinite, out.forces)):
+            self.get_logger().error(f'non-finite forces {out.forces}; holding the last forces', throttle_duration_sec=1.0)
+            self.publish_forces(self.last_forces)
+            return
         self.last_answered_ns = nanoseconds(t)
         self.last_forces = out.forces
         self.last_position = (sample.position, state[PSI], t)
         self.publish_forces(out.forces)
+        sec, nanosec = stamp_fields(t)
         axes = out.axes.values()
-        self.wrench_pub.publish(wrench_msg(self.kit, t, out.controls, self.params.d))
-        self.reference_pub.publish(pose_stamped_msg(self.kit, t, reference.position, reference.yaw))
-        self.diagnostics_pub.publish(diagnostics_msg(
-            self.kit, [a.surface for a in axes], [a.equivalent for a in axes], [a.corrective for a in axes]))
+        self.wrench_pub.publish(self.encode_wrench(sec, nanosec, out.controls))
+        self.reference_pub.publish(self.encode_reference(sec, nanosec, reference.position, reference.yaw))
+        self.diagnostics_pub.publish(self.encode_diagnostics(
+            [a.surface for a in axes], [a.equivalent for a in axes], [a.corrective for a in axes]))
 
     def on_setpoints(self, msg) -> None:
         try:

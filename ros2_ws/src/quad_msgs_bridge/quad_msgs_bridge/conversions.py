@@ -24,6 +24,8 @@ from .timebase import stamp_fields, stamp_seconds
 SUBSYSTEM_NAMES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
 DIAGNOSTIC_QUANTITIES = ('surface', 'nn_equivalent', 'fuzzy_corrective')
 ROTOR_FORCES_LABEL = 'rotor_thrust_N:' + ','.join(ROTOR_NAMES)
+ROTOR_FORCES_DIMS = ((ROTOR_FORCES_LABEL, 4),)
+DIAGNOSTICS_DIMS = (('subsystem:' + ','.join(SUBSYSTEM_NAMES), 6), ('quantity:' + ','.join(DIAGNOSTIC_QUANTITIES), 3))
 
 
 class MessageKit:
@@ -105,16 +107,21 @@ def _quat(q) -> tuple[float, float, float, float]:
     return (float(q.x), float(q.y), float(q.z), float(q.w))
 
 
-def _multi_array_msg(kit: MessageKit, dims: Sequence[tuple[str, int]], data: Sequence[float]):
-    dim_cls = kit['std_msgs/msg/MultiArrayDimension']
+def multi_array_dimensions(dims: Sequence[tuple[str, int]]) -> list[tuple[str, int, int]]:
+    """(label, size, stride) of each dimension of a row-major std_msgs/MultiArrayLayout."""
     strides = []
     stride = 1
     for _, size in reversed(dims):
         stride *= size
         strides.append(stride)
-    strides.reverse()
+    return [(label, size, s) for (label, size), s in zip(dims, reversed(strides))]
+
+
+def _multi_array_msg(kit: MessageKit, dims: Sequence[tuple[str, int]], data: Sequence[float]):
+    dim_cls = kit['std_msgs/msg/MultiArrayDimension']
     layout = kit['std_msgs/msg/MultiArrayLayout'](
-        dim=[dim_cls(label=label, size=size, stride=s) for (label, size), s in zip(dims, strides)], data_offset=0)
+        dim=[dim_cls(label=label, size=size, stride=stride) for label, size, stride in multi_array_dimensions(dims)],
+        data_offset=0)
     return kit['std_msgs/msg/Float64MultiArray'](layout=layout, data=kit.float_sequence(data))
 
 
@@ -160,7 +167,7 @@ def odometry_from_msg(msg) -> OdometrySample:
 def rotor_forces_msg(kit: MessageKit, forces: Sequence[float]):
     """std_msgs/Float64MultiArray of the four rotor thrusts [N], layout labelled with the rotor order."""
     _finite(forces, 'rotor forces')
-    return _multi_array_msg(kit, [(ROTOR_FORCES_LABEL, 4)], [float(f) for f in forces])
+    return _multi_array_msg(kit, ROTOR_FORCES_DIMS, [float(f) for f in forces])
 
 
 def rotor_forces_from_msg(msg) -> tuple[float, float, float, float]:
@@ -187,8 +194,7 @@ def diagnostics_msg(kit: MessageKit, surfaces: Sequence[float], equivalent: Sequ
                     corrective: Sequence[float]):
     """std_msgs/Float64MultiArray, 6 subsystems x (S, NN term, fuzzy term), row-major, labelled layout."""
     data = [float(v) for row in zip(surfaces, equivalent, corrective) for v in row]
-    return _multi_array_msg(kit, [('subsystem:' + ','.join(SUBSYSTEM_NAMES), 6),
-                                  ('quantity:' + ','.join(DIAGNOSTIC_QUANTITIES), 3)], data)
+    return _multi_array_msg(kit, DIAGNOSTICS_DIMS, data)
 
 
 def diagnostics_from_msg(msg) -> tuple[list[float], list[float], list[float]]:

@@ -1,4 +1,5 @@
-"""Fast CDR encoders for the fixed-layout messages published once per control step.
+"""Fast CDR encoders for the fixed-layout messages published once per control step, and decoders of
+the two the lockstep loop receives (odometry, rotor forces).
 
 Each encoder is one precompiled :class:`struct.Struct`: the 4-byte CDR encapsulation header
 (little endian), the header stamp, the constant bytes (frame ids, array layouts) baked in once,
@@ -17,9 +18,10 @@ from itertools import chain
 from typing import Callable, Sequence
 
 from .contract import BASE_FRAME, ODOM_FRAME
-from .conversions import diagnostics_msg, rosbags_kit, rotor_forces_msg
+from .conversions import DIAGNOSTICS_DIMS, ROTOR_FORCES_DIMS, multi_array_dimensions
 from .frames import quaternion_from_euler
 from .state import OdometrySample
+from .timebase import stamp_seconds
 
 #: CDR encapsulation header: plain CDR, little endian, no options
 ENCAPSULATION = b'\x00\x01\x00\x00'
@@ -81,17 +83,19 @@ class CdrLayout:
         return struct.Struct(f'{head}{len(self._constant)}s{"".join(self._floats)}'), bytes(self._constant)
 
 
-def _multi_array_layout(template) -> CdrLayout:
-    """Layout of a std_msgs/Float64MultiArray shaped like ``template`` (same dims, same data size)."""
+def _multi_array_layout(dims: Sequence[tuple[str, int]]) -> CdrLayout:
+    """Layout of a std_msgs/Float64MultiArray with these (label, size) dimensions, row-major, data_offset 0."""
     layout = CdrLayout(stamped=False)
-    layout.uint32(len(template.layout.dim))
-    for dim in template.layout.dim:
-        layout.string(dim.label)
-        layout.uint32(dim.size)
-        layout.uint32(dim.stride)
-    layout.uint32(template.layout.data_offset)
-    layout.uint32(len(template.data))
-    layout.float64(len(template.data))
+    layout.uint32(len(dims))
+    count = 1
+    for label, size, stride in multi_array_dimensions(dims):
+        layout.string(label)
+        layout.uint32(size)
+        layout.uint32(stride)
+        count *= size
+    layout.uint32(0)
+    layout.uint32(count)
+    layout.float64(count)
     return layout
 
 
@@ -119,7 +123,7 @@ def rotor_forces_encoder() -> Callable[[Sequence[float]], bytes]:
 
     Unlike rotor_forces_msg it does not check the values: it records what was sent.
     """
-    pack, constant = _multi_array_layout(rotor_forces_msg(rosbags_kit(), (0.0,) * 4)).compile()
+    pack, constant = _multi_array_layout(ROTOR_FORCES_DIMS).compile()
     pack = pack.pack
 
     def encode(forces: Sequence[float]) -> bytes:
@@ -129,8 +133,7 @@ def rotor_forces_encoder() -> Callable[[Sequence[float]], bytes]:
 
 def diagnostics_encoder() -> Callable[[Sequence[float], Sequence[float], Sequence[float]], bytes]:
     """encode(surfaces, equivalent, corrective) -> CDR of ``conversions.diagnostics_msg(kit, ...)``."""
-    zeros = (0.0,) * 6
-    pack, constant = _multi_array_layout(diagnostics_msg(rosbags_kit(), zeros, zeros, zeros)).compile()
+    pack, constant = _multi_array_layout(DIAGNOSTICS_DIMS).compile()
     pack = pack.pack
     interleave = chain.from_iterable
 
@@ -182,3 +185,68 @@ def clock_encoder() -> Callable[[int, int], bytes]:
     def encode(sec: int, nanosec: int) -> bytes:
         return pack(ENCAPSULATION, sec, nanosec, constant)
     return encode
+
+
+# --- decoders of the two messages the lockstep loop receives ----------------------------------
+# They take any valid little-endian CDR of the type (any frame ids, any array layout) and check it
+# exactly as the matching ``conversions.*_from_msg`` reader does.
+
+_UINT32 = struct.Struct('<I')
+_STAMP = struct.Struct('<iI')
+_POSE = struct.Struct('<7d')
+_TWIST = struct.Struct('<6d')
+_COVARIANCE_SIZE = 36 * 8
+
+
+def _aligned(offset: int, alignment: int) -> int:
+    """``offset`` (from the start of the data) moved up to ``alignment`` within the CDR body."""
+    return offset + (-(offset - len(ENCAPSULATION)) % alignment)
+
+
+def _after_string(data: bytes, offset: int) -> int:
+    offset = _aligned(offset, 4)
+    return offset + 4 + _UINT32.unpack_from(data, offset)[0]
+
+
+def _check_encapsulation(data: bytes, what: str) -> None:
+    if data[:2] != ENCAPSULATION[:2]:
+        raise ValueError(f'{what}: not a little-endian CDR message (encapsulation {bytes(data[:4])!r})')
+
+
+def _check_finite(values, what: str) -> None:
+    if not all(v - v == 0.0 for v in values):   # false for nan and +-inf
+        raise ValueError(f'non-finite value in {what}: {list(values)}')
+
+
+def decode_odometry(data: bytes) -> OdometrySample:
+    """OdometrySample of the CDR of a nav_msgs/Odometry, as ``conversions.odometry_from_msg`` gives it."""
+    _check_encapsulation(data, 'odometry')
+    try:
+        sec, nanosec = _STAMP.unpack_from(data, len(ENCAPSULATION))
+        offset = _after_string(data, len(ENCAPSULATION) + _STAMP.size)      # header.frame_id
+        offset = _aligned(_after_string(data, offset), 8)                    # child_frame_id
+        pose = _POSE.unpack_from(data, offset)
+        twist = _TWIST.unpack_from(data, offset + _POSE.size + _COVARIANCE_SIZE)
+    except struct.error as error:
+        raise ValueError(f'odometry: truncated message ({error})') from error
+    _check_finite(pose + twist, 'odometry')
+    return OdometrySample(stamp_seconds(sec, nanosec), pose[:3], pose[3:], twist[:3], twist[3:])
+
+
+def decode_rotor_forces(data: bytes) -> tuple[float, float, float, float]:
+    """The four thrusts [N] of the CDR of a std_msgs/Float64MultiArray, as ``conversions.rotor_forces_from_msg``."""
+    _check_encapsulation(data, 'rotor_forces')
+    try:
+        offset = len(ENCAPSULATION)
+        dims = _UINT32.unpack_from(data, offset)[0]
+        offset += 4
+        for _ in range(dims):                                   # label, size, stride
+            offset = _aligned(_after_string(data, offset), 4) + 8
+        data_offset, count = struct.unpack_from('<2I', data, _aligned(offset, 4))
+        values = struct.unpack_from(f'<{count}d', data, _aligned(_aligned(offset, 4) + 8, 8))[data_offset:]
+    except struct.error as error:
+        raise ValueError(f'rotor_forces: truncated message ({error})') from error
+    if len(values) != 4:
+        raise ValueError(f'rotor_forces: expected 4 values, got {len(values)}')
+    _check_finite(values, 'rotor_forces')
+    return values

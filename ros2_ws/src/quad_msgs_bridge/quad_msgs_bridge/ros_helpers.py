@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import sys
+from dataclasses import replace
 from typing import Any, Callable, Sequence
 
 import rclpy
@@ -34,8 +35,11 @@ def publisher(node: Node, kit: MessageKit, topic: TopicSpec):
     return node.create_publisher(kit[topic.type], topic.name, qos_profile(topic.qos))
 
 
-def subscription(node: Node, kit: MessageKit, topic: TopicSpec, callback: Callable):
-    return node.create_subscription(kit[topic.type], topic.name, callback, qos_profile(topic.qos))
+def subscription(node: Node, kit: MessageKit, topic: TopicSpec, callback: Callable, raw: bool = False,
+                 depth: int | None = None):
+    """A subscription to a contract topic; ``raw``: the callback gets the CDR bytes; ``depth`` overrides the history."""
+    qos = topic.qos if depth is None else replace(topic.qos, depth=depth)
+    return node.create_subscription(kit[topic.type], topic.name, callback, qos_profile(qos), raw=raw)
 
 
 def declare(node: Node, name: str, default: Any, description: str,

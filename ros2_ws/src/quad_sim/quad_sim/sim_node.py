@@ -20,8 +20,10 @@ import rclpy
 from rclpy.node import Node
 
 from quad_msgs_bridge.contract import CLOCK, ODOM, ROTOR_FORCES
-from quad_msgs_bridge.conversions import MessageKit, clock_msg, odometry_msg, rotor_forces_from_msg
+from quad_msgs_bridge.conversions import MessageKit
+from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder
 from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
+from quad_msgs_bridge.timebase import stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .model import QuadrotorModel
@@ -66,7 +68,10 @@ class SimNode(Node):
         self.hover_forces = (params.hover_force,) * 4
         self.clock_pub = publisher(self, kit, CLOCK)
         self.odom_pub = publisher(self, kit, ODOM)
-        self.forces_sub = subscription(self, kit, ROTOR_FORCES, self.on_forces)
+        # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs
+        self.encode_clock = clock_encoder()
+        self.encode_odometry = odometry_encoder()
+        self.forces_sub = subscription(self, kit, ROTOR_FORCES, self.on_forces, raw=True)
         self.last_forces_wall = time.monotonic()
         self.started = False
         self.stale = False
@@ -87,8 +92,9 @@ class SimNode(Node):
     # --- shared -----------------------------------------------------------------------------
     def publish_odometry(self) -> None:
         sample = self.sim.odometry()
-        self.clock_pub.publish(clock_msg(self.kit, sample.stamp))
-        self.odom_pub.publish(odometry_msg(self.kit, sample))
+        sec, nanosec = stamp_fields(sample.stamp)
+        self.clock_pub.publish(self.encode_clock(sec, nanosec))
+        self.odom_pub.publish(self.encode_odometry(sec, nanosec, sample))
         now = time.monotonic()
         if self.first_publish_wall is None:
             self.first_publish_wall = now
@@ -109,9 +115,9 @@ class SimNode(Node):
             return True
         return False
 
-    def accept(self, msg) -> bool:
+    def accept(self, data: bytes) -> bool:
         try:
-            forces = rotor_forces_from_msg(msg)
+            forces = decode_rotor_forces(data)
         except ValueError as error:
             self.get_logger().error(f'rejected rotor_forces: {error}', throttle_duration_sec=1.0)
             return False
@@ -137,15 +143,15 @@ class SimNode(Node):
         self.published -= 1       # a repeat is not a new step
         self.publish_odometry()
 
-    def on_forces(self, msg) -> None:
+    def on_forces(self, data: bytes) -> None:
         if self.mode == 'realtime':
-            if self.accept(msg):
+            if self.accept(data):
                 self.last_forces_wall = time.monotonic()
                 self.stale = False
             return
         if not self.started or self.finished:
             return
-        self.accept(msg)   # a rejected message still answers: the last valid forces hold
+        self.accept(data)   # a rejected message still answers: the last valid forces hold
         self.last_forces_wall = time.monotonic()
         self.stale = False
         self.sim.advance(self.substeps)
