@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from ros_support import HAVE_RCLPY, node_process, requires_ros, spin_until
+from ros_support import HAVE_RCLPY, ROOT, node_process, requires_ros, spin_until
 
 pytestmark = [requires_ros, pytest.mark.ros]
 
@@ -71,34 +71,93 @@ def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
     assert len(received['setpoints'].points) > 1
 
 
-@pytest.mark.parametrize('mode', ['lockstep'])
-def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path, mode):
-    from rosbags.highlevel import AnyReader
-    from rosbags.typesys import Stores, get_typestore
+def payloads(bag, namespace):
+    """{topic relative to the namespace: [CDR bytes, in order]} of a bag."""
+    from mcap.reader import make_reader
+    from quad_msgs_bridge.bag_reader import mcap_file
+    topics = {}
+    with open(mcap_file(bag), 'rb') as stream:
+        for _, channel, message in make_reader(stream).iter_messages(log_time_order=False):
+            topics.setdefault(channel.topic.removeprefix(f'/{namespace}/'), []).append(bytes(message.data))
+    return topics
+
+
+def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
+    """Same odometry sequence, same bag payloads byte for byte, same summary metrics (issues 3 and 4)."""
     from flight_stack.embedded import fly_embedded
     from flight_stack.ros_backend import RosFlightConfig, fly_ros
     from nnit2fsmc_controller.factory import load_gains
     from quad_msgs_bridge.contract import RECORDED_TOPICS
+    from quad_msgs_bridge.flight_bag import FlightBag
+    from quad_msgs_bridge.flight_from_bag import read_flight
+    from quad_msgs_bridge.metrics import flight_metrics
     from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
-    duration = 2.0
+    duration, settle = 7.0, 5.0
     trajectory = make_scenario('paper', duration)
-    config = RosFlightConfig(namespace='equal', controller='nnit2fsmc', scenario='paper', duration=duration,
-                             disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0,
-                             initial_state=trajectory.initial_state, bag=tmp_path / 'bag',
-                             topics=[t.name for t in RECORDED_TOPICS], mode=mode, quiet=True)
-    result = fly_ros(config)
+    result = fly_ros(RosFlightConfig(
+        namespace='equal', controller='nnit2fsmc', scenario='paper', duration=duration, disturbances=True, seed=0,
+        physics_rate=1000.0, control_rate=1000.0, initial_state=trajectory.initial_state, bag=tmp_path / 'ros',
+        topics=[t.name for t in RECORDED_TOPICS], settle_time=settle, quiet=True))
     assert result.failed_node is None, result
-    with AnyReader([tmp_path / 'bag'], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
-        odom = [c for c in reader.connections if c.topic == '/equal/odom']
-        samples = [odometry_from_msg(reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages(odom)]
     params, disturbances = load_vehicle_file()
-    embedded = fly_embedded('nnit2fsmc', trajectory, params, disturbances, load_gains(), duration, 1000.0)
-    assert len(samples) == embedded.steps
-    ros_states = np.array([state_from_odometry(s) for s in samples])
-    assert np.abs(np.array([s.stamp for s in samples]) - embedded.record.time).max() == 0.0
-    assert np.abs(ros_states[:, :3] - embedded.record.position).max() <= 1e-9
-    assert np.abs(ros_states[:, 8] - embedded.record.yaw).max() <= 1e-9
+    with FlightBag.create(tmp_path / 'embedded', params, settle, namespace='equal') as bag:
+        embedded = fly_embedded('nnit2fsmc', trajectory, params, disturbances, load_gains(), duration, 1000.0,
+                                bag=bag)
+
+    ros_flight = read_flight(tmp_path / 'ros')
+    assert len(ros_flight.record.time) == embedded.steps
+    assert np.abs(ros_flight.record.time - embedded.record.time).max() == 0.0
+    assert np.abs(ros_flight.record.position - embedded.record.position).max() <= 1e-9
+    assert np.abs(ros_flight.record.forces - embedded.record.forces).max() <= 1e-9
+    live = flight_metrics(embedded.record, settle, params.F_min, params.F_max)
+    from_ros = flight_metrics(ros_flight.record, settle, params.F_min, params.F_max)
+    for key in ('rmse_position_m', 'max_position_error_m', 'rmse_yaw_rad', 'saturation_fraction'):
+        assert from_ros[key] == pytest.approx(live[key], abs=1e-9), key
+    for control, value in live['chattering'].items():
+        assert from_ros['chattering'][control] == pytest.approx(value, abs=1e-9), control
+
+    ros_payloads, embedded_payloads = payloads(tmp_path / 'ros', 'equal'), payloads(tmp_path / 'embedded', 'equal')
+    assert set(ros_payloads) == set(embedded_payloads) == {t.name for t in RECORDED_TOPICS}
+    for topic, messages in embedded_payloads.items():
+        assert ros_payloads[topic] == messages, f'{topic}: the ROS flight sent other bytes than the embedded one'
+
+
+def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
+    import os
+    import signal
+    import time
+    from flight_stack.processes import source_tree_environment
+    from quad_msgs_bridge.flight_from_bag import read_flight
+
+    bag = tmp_path / 'bag'
+    stack = subprocess.Popen(
+        [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', '--namespace', 'killed', '--duration', '60',
+         '--out', str(tmp_path), '--bag', str(bag), '--quiet'],
+        env=source_tree_environment(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 60.0
+        controller_pid = None
+        while controller_pid is None and time.monotonic() < deadline:
+            found = subprocess.run(['pgrep', '-f', 'controller_node.*__ns:=/killed'], capture_output=True, text=True)
+            pids = found.stdout.split()
+            if pids and (bag / 'metadata.yaml').exists():
+                time.sleep(3.0)          # well into the flight
+                controller_pid = int(pids[0])
+            else:
+                time.sleep(0.2)
+        assert controller_pid is not None, 'the controller never started'
+        os.kill(controller_pid, signal.SIGKILL)
+        output, _ = stack.communicate(timeout=120)
+    finally:
+        if stack.poll() is None:
+            stack.kill()
+    assert stack.returncode not in (0, None), output
+    assert 'controller' in output and 'failed' in output
+    leftovers = subprocess.run(['pgrep', '-f', '__ns:=/killed'], capture_output=True, text=True).stdout.split()
+    assert leftovers == [], 'nodes left running after the entry script exited'
+    flight = read_flight(bag)   # the recorder finalized what it had: readable, a prefix of the flight
+    assert 1.0 < flight.record.time[-1] < 59.0
 
 
 def test_goal_pose_is_flown_to_and_held(ros_node):
