@@ -36,7 +36,7 @@ class TopicSpec:
     role: str       #: who publishes it, for documentation
 
 
-LOCKSTEP = QosSpec('reliable', 'volatile', 100)
+LOCKSTEP = QosSpec('reliable', 'volatile', 1000)   # history for a slow reader (a recorder) to catch up on
 LATCHED = QosSpec('reliable', 'transient_local', 1)
 
 ODOM = TopicSpec('odom', 'nav_msgs/msg/Odometry', LOCKSTEP, 'quad_sim -> controller, tools')

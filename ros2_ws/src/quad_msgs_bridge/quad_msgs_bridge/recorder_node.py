@@ -60,6 +60,7 @@ class RecorderNode(Node):
         self.kit = kit
         self.clock_ns: int | None = None
         self.received = 0
+        self.recorded: list = []
         for topic in self.topics:
             if topic is not ODOM:
                 self.subscribe(topic)
@@ -73,7 +74,7 @@ class RecorderNode(Node):
                              reliability=qos.reliability, durability=qos.durability)
         is_clock = topic is CLOCK
 
-        def on_message(data: bytes, info) -> None:
+        def record(data: bytes, info) -> None:
             now = time.time_ns()
             if is_clock:   # CDR: 4-byte encapsulation header, then int32 sec, uint32 nanosec
                 sec = int.from_bytes(data[4:8], 'little', signed=True)
@@ -82,7 +83,22 @@ class RecorderNode(Node):
             self.writer.write_serialized(name, data, log_time, info.get('source_timestamp', now) or now)
             self.received += 1
 
-        self.create_subscription(self.kit[topic.type], topic.name, on_message, profile, raw=True)
+        def on_message(data: bytes, info) -> None:
+            record(data, info)
+            self.take_waiting()
+
+        subscription = self.create_subscription(self.kit[topic.type], topic.name, on_message, profile, raw=True)
+        self.recorded.append((subscription, record))
+
+    def take_waiting(self) -> None:
+        """Record every message already waiting in any subscription.
+
+        A control step brings seven messages at once; taking them all per wake-up instead of one per
+        executor round keeps the recorder ahead of a 1 kHz loop on a small machine.
+        """
+        for subscription, record in self.recorded:
+            while (taken := subscription.handle.take_message(subscription.msg_type, True)) is not None:
+                record(*taken)
 
     def open_gate(self) -> None:
         """Subscribe to odom once every recorded per-step topic has a discovered publisher."""

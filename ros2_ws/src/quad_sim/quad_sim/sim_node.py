@@ -52,7 +52,7 @@ class SimNode(Node):
         self.duration = declare(self, 'duration', 0.0, 'stop stepping at this sim time [s]; 0: never', (0.0, 1e7))
         self.wait_for_subscribers = declare(
             self, 'wait_for_subscribers', 1,
-            'lockstep: start once odom has this many subscribers (the controller, plus any recorder)', (1, 1000))
+            'start once odom has this many subscribers (the controller, plus any recorder)', (1, 1000))
         self.exit_at_end = declare(self, 'exit_at_end', False, 'shut the node down once duration is reached')
         start = declare(self, 'initial_state', [0.0] * 12,
                         'x y z [m] vx vy vz [m/s] phi theta psi [rad] dphi dtheta dpsi [rad/s], world ENU')
@@ -124,12 +124,17 @@ class SimNode(Node):
         return self.sim.set_forces(forces)
 
     # --- lockstep ---------------------------------------------------------------------------
+    def ready(self) -> bool:
+        """Start once ``odom`` has its subscribers and a controller publishes ``rotor_forces``."""
+        if not self.started and (self.count_subscribers(ODOM.name) >= self.wait_for_subscribers
+                                 and self.count_publishers(ROTOR_FORCES.name) > 0):
+            self.started = True
+            self.last_forces_wall = time.monotonic()
+        return self.started
+
     def lockstep_watchdog(self) -> None:
         if not self.started:
-            if (self.count_subscribers(ODOM.name) >= self.wait_for_subscribers
-                    and self.count_publishers(ROTOR_FORCES.name) > 0):
-                self.started = True
-                self.last_forces_wall = time.monotonic()
+            if self.ready():
                 self.publish_odometry()
             return
         if self.finished or time.monotonic() - self.last_forces_wall < self.input_timeout:
@@ -161,7 +166,7 @@ class SimNode(Node):
     # --- realtime ---------------------------------------------------------------------------
     def realtime_step(self) -> None:
         """Advance sim time to speed_factor x the wall time elapsed (catching up missed ticks), publish."""
-        if self.at_end():
+        if self.at_end() or not self.ready():
             return
         now = time.monotonic()
         if self.realtime_origin is None:
