@@ -4,7 +4,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup_venv.sh .venv requirements-test.txt
-colcon=(.venv/bin/python -m colcon)
+colcon=("$PWD/.venv/bin/python" -m colcon)
 cd ros2_ws
 rm -rf build install log
 "${colcon[@]}" build --event-handlers console_cohesion- summary+
