@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 from quad_msgs_bridge.metrics import FlightRecord, flight_metrics
+from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 
@@ -46,7 +47,8 @@ def write_summary(summary: dict, out_dir: Path) -> Path:
 
 def format_summary(summary: dict) -> str:
     """A short human-readable table of the main figures."""
-    chattering = '  '.join(f'{name} {value:.3g}' for name, value in summary['chattering'].items())
+    chattering = '  '.join(f'{name} {summary["chattering"][name]:.3g} {unit}/s'
+                           for name, unit in zip(CONTROL_NAMES, CONTROL_UNITS))
     shares = summary['fuzzy_share']
     share_line = '  '.join(f'{axis} {values[0]:.2f}->{values[-1]:.2f}' for axis, values in shares.items() if values)
     rtf = summary.get('real_time_factor')
@@ -58,7 +60,7 @@ def format_summary(summary: dict) -> str:
         f'    position RMSE     {summary["rmse_position_m"] * 100:8.3f} cm',
         f'    max position err  {summary["max_position_error_m"] * 100:8.3f} cm',
         f'    yaw RMSE          {summary["rmse_yaw_rad"]:8.5f} rad',
-        f'    chattering [1/s]  {chattering}',
+        f'    chattering        {chattering}',
         f'    rotor saturation  {summary["saturation_fraction"] * 100:.2f} % of steps '
         f'({summary["saturation_fraction_whole_flight"] * 100:.2f} % over the whole flight)',
         f'  corrective share (first -> last {summary["fuzzy_share_window_s"]:.0f} s window): {share_line}',

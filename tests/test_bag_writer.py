@@ -3,7 +3,9 @@ finished chunks on disk while recording, and `recover` of a truncated bag."""
 import errno
 import os
 import shutil
+import tempfile
 import threading
+from pathlib import Path
 
 import pytest
 from rosbags.highlevel import AnyReader
@@ -53,14 +55,43 @@ def test_an_unwritable_path_is_a_clear_error_naming_it(tmp_path):
     assert str(blocker / 'bag') in str(error.value)
 
 
-@pytest.mark.skipif(os.geteuid() == 0, reason='root writes into read-only directories')
-def test_a_read_only_directory_is_a_clear_error(tmp_path):
-    tmp_path.chmod(0o500)
+NOBODY = 65534
+
+
+def outcome_unprivileged(call) -> str:
+    """What ``call()`` raised (``'TypeName: message'``, or ``'no error'``), run in a forked child that
+    drops root privileges first: root writes into read-only directories, an ordinary user does not."""
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:
+        os.close(read)
+        try:
+            if os.geteuid() == 0:
+                os.setgid(NOBODY)
+                os.setuid(NOBODY)
+            call()
+            outcome = 'no error'
+        except BaseException as error:
+            outcome = f'{type(error).__name__}: {error}'
+        os.write(write, outcome.encode())
+        os._exit(0)
+    os.close(write)
+    with os.fdopen(read) as pipe:
+        outcome = pipe.read()
+    os.waitpid(pid, 0)
+    return outcome
+
+
+def test_a_read_only_directory_is_a_clear_error():
+    read_only = Path(tempfile.mkdtemp())     # under /tmp: reachable by the unprivileged child
+    read_only.chmod(0o555)
     try:
-        with pytest.raises(BagWriteError, match='Permission denied'):
-            BagWriter(tmp_path / 'bag', TOPICS)
+        outcome = outcome_unprivileged(lambda: BagWriter(read_only / 'bag', TOPICS))
     finally:
-        tmp_path.chmod(0o700)
+        read_only.chmod(0o700)
+        shutil.rmtree(read_only)
+    assert outcome.startswith('BagWriteError') and 'Permission denied' in outcome
+    assert str(read_only / 'bag') in outcome
 
 
 def test_an_existing_bag_is_replaced_only_with_overwrite(tmp_path):

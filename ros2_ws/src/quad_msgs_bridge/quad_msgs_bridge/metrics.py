@@ -76,7 +76,7 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
 
     * rmse_position_m, max_position_error_m: Euclidean position error [m];
     * rmse_yaw_rad: wrapped yaw error [rad];
-    * chattering: total variation of each of U1..U4 per second of flight [unit/s];
+    * chattering: total variation of each of U1..U4 per second of flight [N/s; U4: N m/s];
     * saturation_fraction: share of control steps with any rotor at F_min or F_max (and the same
       over the whole flight, saturation_fraction_whole_flight);
     * fuzzy_share: see :func:`fuzzy_share`, over the whole flight.

@@ -11,6 +11,7 @@ from .numeric import namespace_for
 
 ROTOR_NAMES = ('F1_front', 'F2_right', 'F3_back', 'F4_left')
 CONTROL_NAMES = ('U1', 'U2', 'U3', 'U4')
+CONTROL_UNITS = ('N', 'N', 'N', 'N m')   #: of U1..U4
 
 
 def controls_from_forces(f1, f2, f3, f4, yaw_coefficient):

@@ -20,11 +20,10 @@ import numpy as np
 from .conversions import SUBSYSTEM_NAMES
 from .flight_from_bag import BagFlight
 from .metrics import _wrap, fuzzy_share
-from .mixer import CONTROL_NAMES, ROTOR_NAMES
+from .mixer import CONTROL_NAMES, CONTROL_UNITS, ROTOR_NAMES
 
 SHARE_WINDOW = 0.5        #: [s] window of the fuzzy-share plot
 ZOOM_SPAN = 1.0           #: [s] span of the control zoom
-_CONTROL_UNITS = ('N', 'N', 'N', 'N m')
 _REFERENCE_STYLE = dict(color='black', linestyle='--', linewidth=1.0)
 
 
@@ -108,7 +107,7 @@ def plot_controls(plt, flights: Sequence[BagFlight], path: Path, span: tuple[flo
             if not span:
                 axes[k][1].plot(r.time, r.forces[:, k], linewidth=0.8, **_layer(i, flights))
     for k in range(4):
-        axes[k][0].set_ylabel(f'{CONTROL_NAMES[k]} [{_CONTROL_UNITS[k]}]')
+        axes[k][0].set_ylabel(f'{CONTROL_NAMES[k]} [{CONTROL_UNITS[k]}]')
         if not span:
             axes[k][1].set_ylabel(f'{ROTOR_NAMES[k]} [N]')
             axes[k][1].axhline(flights[0].params.F_max, color='grey', linewidth=0.5, linestyle=':')

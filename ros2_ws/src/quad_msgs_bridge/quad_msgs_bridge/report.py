@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Sequence
 
 from .conversions import SUBSYSTEM_NAMES
+from .mixer import CONTROL_NAMES, CONTROL_UNITS
 
 
 def metric_rows(metrics: Sequence[dict]) -> list[tuple[str, list[str]]]:
@@ -24,8 +25,8 @@ def metric_rows(metrics: Sequence[dict]) -> list[tuple[str, list[str]]]:
         row('max position error [cm]', lambda m: f'{m["max_position_error_m"] * 100:.3f}'),
         row('yaw RMSE [rad]', lambda m: f'{m["rmse_yaw_rad"]:.5f}'),
     ]
-    for name in ('U1', 'U2', 'U3', 'U4'):
-        rows.append(row(f'chattering {name} [unit/s]', lambda m, n=name: f'{m["chattering"][n]:.4g}'))
+    for name, unit in zip(CONTROL_NAMES, CONTROL_UNITS):
+        rows.append(row(f'chattering {name} [{unit}/s]', lambda m, n=name: f'{m["chattering"][n]:.4g}'))
     rows.append(row('rotor saturation [% of steps]', lambda m: f'{m["saturation_fraction"] * 100:.2f}'))
     rows.append(row('  over the whole flight [%]', lambda m: f'{m["saturation_fraction_whole_flight"] * 100:.2f}'))
     for axis in SUBSYSTEM_NAMES:
