@@ -21,4 +21,31 @@ for executable in quad_sim/quad_sim nnit2fsmc_controller/nnit2fsmc_controller nn
     status=1
   fi
 done
+[ $status = 0 ] || exit $status
+
+# The installed executables run with every import they need: review without ROS; with ROS, each node
+# through `ros2 run` with its installed params file, refusing an invalid value (exit 2, naming it).
+set +u; source install/setup.bash; set -u
+install/quad_msgs_bridge/lib/quad_msgs_bridge/review --help >/dev/null
+echo "runs: review --help"
+if ! "${colcon[0]}" -c 'import rclpy' 2>/dev/null; then
+  echo "skipped: ros2 run of the nodes (rclpy cannot be imported: source /opt/ros/jazzy/setup.bash first)"
+  exit 0
+fi
+check_refuses() {   # package executable params-file-or-none bad-parameter
+  local output code=0 params=()
+  [ "$3" = none ] || params=(--params-file "install/$1/share/$1/config/$3")
+  output=$(ros2 run "$1" "$2" --ros-args "${params[@]}" -p "$4" 2>&1) || code=$?
+  if [ $code = 2 ] && grep -q "parameter ${4%%:=*}" <<<"$output"; then
+    echo "runs: ros2 run $1 $2 (refused $4)"
+  else
+    echo "FAILED: ros2 run $1 $2 ${params[*]} -p $4 exited $code:" >&2
+    echo "$output" >&2
+    status=1
+  fi
+}
+check_refuses quad_sim quad_sim quad_sim.yaml mode:=warp
+check_refuses nnit2fsmc_controller nnit2fsmc_controller controller.yaml controller:=lqr
+check_refuses nnit2fsmc_controller trajectory trajectory.yaml scenario:=loop
+check_refuses quad_msgs_bridge record none queue_size:=0
 exit $status

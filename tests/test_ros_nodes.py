@@ -20,8 +20,8 @@ if HAVE_RCLPY:
 
 from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
                                        REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, resolve)
-from quad_msgs_bridge.conversions import odometry_from_msg, pose_stamped_msg, rclpy_kit
-from quad_msgs_bridge.state import state_from_odometry
+from quad_msgs_bridge.conversions import odometry_from_msg, odometry_msg, pose_stamped_msg, rclpy_kit, rotor_forces_msg
+from quad_msgs_bridge.state import odometry_from_state, state_from_odometry
 from nnit2fsmc_controller.trajectory import Hover, make_scenario
 
 
@@ -206,3 +206,90 @@ def test_invalid_parameter_is_refused_at_start_naming_it(module, params, name):
     assert done.returncode == 2, done.stdout + done.stderr
     assert f'parameter {name}' in done.stderr
     assert 'valid' in done.stderr
+
+
+def test_non_finite_input_is_answered_with_finite_forces_and_the_bad_message_is_named(ros_node):
+    """NaN odometry to the controller and NaN rotor forces to the simulator, over real topics."""
+    namespace = 'nonfinite'
+    kit = rclpy_kit()
+    hover = Hover(position=(0.0, 0.0, 1.0))
+    forces, odometry = [], []
+    ros_node.create_subscription(kit[ROTOR_FORCES.type], resolve(ROTOR_FORCES, namespace),
+                                 lambda msg: forces.append(list(msg.data)), qos_profile(ROTOR_FORCES.qos))
+    ros_node.create_subscription(kit[ODOM.type], resolve(ODOM, namespace),
+                                 lambda msg: odometry.append(msg), qos_profile(ODOM.qos))
+    odom_pub = ros_node.create_publisher(kit[ODOM.type], resolve(ODOM, namespace), qos_profile(ODOM.qos))
+    processes = [
+        node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
+                     {'scenario': 'hover', 'start_time': 0.0, 'use_sim_time': True}),
+        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {'use_sim_time': True}),
+    ]
+    try:
+        assert spin_until(ros_node, lambda: ros_node.count_subscribers(resolve(ODOM, namespace)) >= 2
+                          and ros_node.count_publishers(resolve(ROTOR_FORCES, namespace)) >= 1, timeout=30.0)
+        for k in range(1, 4):
+            msg = odometry_msg(kit, odometry_from_state(k * 1e-3, hover.initial_state))
+            if k == 2:
+                msg.pose.pose.position.z = math.nan
+            odom_pub.publish(msg)
+            assert spin_until(ros_node, lambda: len(forces) == k, timeout=20.0), f'no answer to odometry {k}'
+        # the simulator alone, answered with a NaN force: it keeps its last valid forces (zero: on the ground)
+        sim = node_process('sim', 'quad_sim.sim_node', namespace, {'wait_for_subscribers': 1})
+        processes.append(sim)
+        forces_pub = ros_node.create_publisher(kit[ROTOR_FORCES.type], resolve(ROTOR_FORCES, namespace),
+                                               qos_profile(ROTOR_FORCES.qos))
+        assert spin_until(ros_node, lambda: odometry, timeout=30.0)
+        bad = rotor_forces_msg(kit, [1.0, 1.0, 1.0, 1.0])
+        bad.data[1] = math.inf
+        forces_pub.publish(bad)
+        assert spin_until(ros_node, lambda: len(odometry) >= 2, timeout=20.0)
+    finally:
+        codes = stop_all(processes)
+    assert all(code == 0 for code in codes.values()), codes
+    assert len(forces) == 3 and all(math.isfinite(f) for answer in forces for f in answer)
+    assert forces[1] == forces[0], 'the NaN odometry must be answered with the last valid forces'
+    controller_log = '\n'.join(processes[1].lines)
+    assert 'rejected odometry' in controller_log and 'nan' in controller_log.lower()
+    assert 'rejected rotor_forces' in '\n'.join(sim.lines)
+    after = odometry_from_msg(odometry[1])          # one control step later, still on the ground
+    assert after.stamp == pytest.approx(1e-3) and all(math.isfinite(v) for v in after.position)
+    assert after.position[2] == 0.0
+
+
+def odometry_stamps_and_publish_times(bag, namespace) -> tuple[np.ndarray, np.ndarray]:
+    """Header stamps and publish (send, wall) times [s] of the odometry recorded in ``bag``."""
+    from mcap.reader import make_reader
+    from quad_msgs_bridge.bag_reader import mcap_file
+    from quad_msgs_bridge.fast_cdr import decode_odometry
+    stamps, sent = [], []
+    with open(mcap_file(bag), 'rb') as stream:
+        for _, _, message in make_reader(stream).iter_messages(topics=[resolve(ODOM, namespace)]):
+            stamps.append(decode_odometry(message.data).stamp)
+            sent.append(message.publish_time * 1e-9)
+    return np.array(stamps), np.array(sent)
+
+
+def test_realtime_mode_never_runs_ahead_of_the_wall_clock_and_holds_hover(tmp_path):
+    from flight_stack.ros_backend import RosFlightConfig, fly_ros
+    from quad_msgs_bridge.bag_timing import message_timing
+    from quad_msgs_bridge.contract import RECORDED_TOPICS
+    from quad_msgs_bridge.flight_from_bag import read_flight
+
+    duration = 4.0
+    hover = make_scenario('hover', duration)
+    result = fly_ros(RosFlightConfig(
+        namespace='realtime', controller='nnit2fsmc', scenario='hover', duration=duration, disturbances=True, seed=0,
+        physics_rate=1000.0, control_rate=1000.0, initial_state=hover.initial_state, bag=tmp_path / 'bag',
+        topics=[t.name for t in RECORDED_TOPICS], mode='realtime', speed_factor=1.0, settle_time=2.0, quiet=True))
+    assert result.failed_node is None, result
+    flight = read_flight(tmp_path / 'bag')
+    assert flight.record.time[-1] == pytest.approx(duration, abs=0.05)
+    # at speed factor 1 sim time never runs ahead of the wall clock: odometry of stamp t is sent t after the first
+    stamps, sent = odometry_stamps_and_publish_times(tmp_path / 'bag', 'realtime')
+    assert len(stamps) > 100
+    assert np.all((sent - sent[0]) - (stamps - stamps[0]) >= -1e-3)
+    error = np.linalg.norm(flight.record.position - flight.record.reference_position, axis=1)
+    assert error[flight.record.time >= 2.0].max() < 0.05
+    assert np.isfinite(flight.record.forces).all()
+    timing = message_timing(tmp_path / 'bag', 'realtime')
+    assert timing['answered'] > 0 and timing['latency_median_ms'] > 0.0
