@@ -3,7 +3,7 @@
 
 Process A publishes nav_msgs/Odometry and waits for the std_msgs/Float64MultiArray (4 values) that
 process B sends back for it, then sends the next: the same traffic pattern as one lockstep step,
-with no simulation or control work. QoS: the contract's lockstep profile (reliable, keep last 100).
+with no simulation or control work. QoS: the contract's lockstep profile (`contract.LOCKSTEP`).
 
 Needs a sourced ROS 2 (source /opt/ros/jazzy/setup.bash). Usage: python3 bench/bench_ros_pingpong.py [--count N]
 """

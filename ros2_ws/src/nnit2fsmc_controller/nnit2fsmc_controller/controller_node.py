@@ -6,9 +6,10 @@ publishes ``rotor_forces`` first (the simulator can go on integrating), then ``c
 ``control/reference`` and ``control/diagnostics``, all stamped t.
 
 Failure behaviour: odometry that arrives before any setpoint is held and answered when the first
-setpoints arrive; a repeated odometry (same or older stamp) is ignored; non-finite odometry or
-setpoints are rejected with a throttled error, and the last valid forces (hover thrust if none)
-are published instead, so a non-finite force is never published.
+setpoints arrive; a repeated odometry (the stamp last answered) is ignored; an older stamp means
+the simulator restarted, and the controller starts afresh (NN weights, filters) and answers it;
+non-finite odometry or setpoints are rejected with a throttled error, and the last valid forces
+(hover thrust if none) are published instead, so a non-finite force is never published.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
 from quad_msgs_bridge.state import PSI, state_from_odometry
-from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
+from quad_msgs_bridge.timebase import nanoseconds, seconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .factory import CONTROLLERS, build_controller, flatten_gains, gain_description, load_gains, unflatten_gains
@@ -57,8 +58,9 @@ class ControllerNode(Node):
             else:
                 gains[name] = declare(self, name, default, gain_description(name),
                                       (0, 2 ** 31 - 1) if isinstance(default, int) else _UNBOUNDED)
+        self.kind, self.gains = kind, unflatten_gains(gains)
         try:
-            self.controller = build_controller(kind, self.params, unflatten_gains(gains))
+            self.controller = build_controller(kind, self.params, self.gains)
         except (ParameterError, ValueError) as error:
             raise ParameterError(f'controller gains: {error}') from error
         self.forces_pub = publisher(self, kit, ROTOR_FORCES)
@@ -99,8 +101,10 @@ class ControllerNode(Node):
             self.publish_forces(self.last_forces)
             return
         stamp_ns = nanoseconds(sample.stamp)
-        if stamp_ns <= self.last_answered_ns:
-            return
+        if stamp_ns == self.last_answered_ns:
+            return      # a repeat of the odometry already answered
+        if stamp_ns < self.last_answered_ns:
+            self.restart(stamp_ns)
         if self.path is None:
             if self.pending is None:
                 self.get_logger().info('odometry received; waiting for setpoints or a goal_pose before answering')
@@ -132,6 +136,13 @@ class ControllerNode(Node):
         self.reference_pub.publish(self.encode_reference(sec, nanosec, reference.position, reference.yaw))
         self.diagnostics_pub.publish(self.encode_diagnostics(
             [a.surface for a in axes], [a.equivalent for a in axes], [a.corrective for a in axes]))
+
+    def restart(self, stamp_ns: int) -> None:
+        """Sim time went back (a restarted or reset simulator): a new flight gets a fresh controller."""
+        self.get_logger().warning(f'odometry time jumped back from {seconds(self.last_answered_ns):.3f} s to '
+                                  f'{seconds(stamp_ns):.3f} s (simulator restarted?): restarting the controller')
+        self.controller = build_controller(self.kind, self.params, self.gains)
+        self.last_answered_ns = -1
 
     def on_setpoints(self, msg) -> None:
         try:

@@ -12,7 +12,6 @@ is drained and the bag is finalized.
 """
 from __future__ import annotations
 
-import signal
 import sys
 import time
 
@@ -20,13 +19,12 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
-from rclpy.signals import SignalHandlerOptions
 
 from .bag_writer import BagWriter
 from .contract import CLOCK, ODOM, RECORDED_TOPICS, TopicSpec, resolve
 from .conversions import MessageKit, rclpy_kit
 from .flight_bag import flight_custom_data
-from .ros_helpers import declare, qos_profile
+from .ros_helpers import declare, init_ros, qos_profile, spin_until_stopped
 from .timebase import NANOSECONDS_PER_SECOND
 from .vehicle_params import ParameterError, load_vehicle_file
 
@@ -113,17 +111,13 @@ class RecorderNode(Node):
 
 def main(argv: list[str] | None = None) -> int:
     """Spin until SIGINT/SIGTERM, then drain what has arrived and finalize the bag."""
-    rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
-    stop = []
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda number, frame: stop.append(number))
+    signals = init_ros(argv)
     node = None
     try:
         node = RecorderNode(rclpy_kit())
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while not stop:
-            executor.spin_once(timeout_sec=0.1)
+        spin_until_stopped(executor, signals)
         quiet_since = time.monotonic()
         while time.monotonic() - quiet_since < 0.3:
             before = node.received

@@ -5,15 +5,17 @@ This is the bridge's only module that imports rclpy; the cores never import it.
 from __future__ import annotations
 
 import math
+import signal
 import sys
 from dataclasses import replace
 from typing import Any, Callable, Sequence
 
 import rclpy
 from rclpy.exceptions import InvalidParameterValueException, ParameterException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
 from .contract import QosSpec, TopicSpec, resolve
@@ -78,24 +80,45 @@ def topic_name(node: Node, topic: TopicSpec) -> str:
     return resolve(topic, node.get_namespace())
 
 
+def init_ros(argv: list[str] | None = None) -> list[int]:
+    """``rclpy.init`` with our own SIGINT/SIGTERM handling; returns the list the signals are appended to.
+
+    rclpy's own handler both shuts the context down and chains to Python's, which raises
+    KeyboardInterrupt at an arbitrary point, also in the middle of the cleanup after the spin: a
+    simulator stopped mid-flight then died by its SIGINT (exit code -2) instead of exiting 0. Here a
+    signal only ends :func:`spin_until_stopped`, and the cleanup runs undisturbed.
+    """
+    rclpy.init(args=argv if argv is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    signals: list[int] = []
+    for number in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(number, lambda received, frame: signals.append(received))
+    return signals
+
+
+def spin_until_stopped(executor: Executor, signals: list[int]) -> None:
+    """Spin until a signal arrives (within 0.1 s) or the context is shut down (e.g. by the node itself)."""
+    try:
+        while not signals and executor.context.ok():
+            executor.spin_once(timeout_sec=0.1)
+    except ExternalShutdownException:
+        pass
+
+
 def run_node(make_node: Callable[[MessageKit], Node], argv: list[str] | None = None) -> int:
-    """Init rclpy, build the node, spin until shutdown; invalid parameters end it with exit code 2."""
-    rclpy.init(args=argv if argv is not None else sys.argv)
+    """Init rclpy, build the node, spin until SIGINT/SIGTERM or shutdown; invalid parameters end it with exit code 2."""
+    signals = init_ros(argv)
     node = None
     code = 0
     try:
         node = make_node(rclpy_kit())
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
+        spin_until_stopped(executor, signals)
     except ParameterError as error:
         print(f'[FATAL] invalid parameter: {error}', file=sys.stderr, flush=True)
         code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     finally:
         if node is not None:
             node.destroy_node()
-        if rclpy.ok():
-            rclpy.shutdown()
+        rclpy.try_shutdown()
     return code
