@@ -13,6 +13,8 @@ Examples:
 Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover`:
   python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
   python3 run_stack.py recover BAG                       # finalize the bag of a killed recording
+  python3 run_stack.py rosbag2-qos --namespace quad > qos.yaml   # for your own `ros2 bag record
+                                                         #   --qos-profile-overrides-path qos.yaml`
 """
 from __future__ import annotations
 
@@ -29,6 +31,7 @@ from flight_stack.ros_backend import RosFlightConfig, fly_ros
 from flight_stack.summary import build_summary, format_summary, write_summary
 from nnit2fsmc_controller.factory import CONTROLLERS, control_period, load_gains
 from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
+from quad_msgs_bridge.bag_metadata import qos_overrides_main
 from quad_msgs_bridge.bag_recover import recover_main
 from quad_msgs_bridge.bag_timing import message_timing
 from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS
@@ -61,6 +64,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                         help='ROS backend: lockstep (deterministic) or realtime simulation')
     parser.add_argument('--speed-factor', type=float, default=1.0, help='ROS backend, realtime: sim s per wall s')
+    parser.add_argument('--extra-subscribers', type=int, default=0, metavar='N',
+                        help='ROS backend: the simulator also waits for N more odom subscribers before it starts '
+                             '(your own `ros2 bag record`, RViz), so they miss nothing of a lockstep flight')
     parser.add_argument('--bag', type=Path, default=None,
                         help='record the flight into this rosbag2 (MCAP) folder (default OUT/bag); '
                              'then review it into OUT (report.html, plots/)')
@@ -102,6 +108,7 @@ def fly_on_ros(args, trajectory, duration: float, disturbances: bool, physics_ra
         disturbances=disturbances, seed=args.seed, physics_rate=physics_rate,
         control_rate=1.0 / control_period(gains), initial_state=trajectory.initial_state, bag=bag_path,
         topics=[t.name for t in topics], mode=args.mode, speed_factor=args.speed_factor,
+        extra_odom_subscribers=args.extra_subscribers,
         vehicle_file=args.vehicle, gains_file=args.gains, settle_time=settle_time, quiet=args.quiet))
     if result.failed_node:
         print(f'error: the flight failed: {result.failed_node} (exit codes {result.exit_codes}); '
@@ -124,6 +131,8 @@ def main(argv: list[str] | None = None) -> int:
         return review_main(argv[1:])
     if argv[:1] == ['recover']:
         return recover_main(argv[1:])
+    if argv[:1] == ['rosbag2-qos']:
+        return qos_overrides_main(argv[1:])
     args = parse_args(argv)
     try:
         params, disturbances = load_vehicle_file(args.vehicle)
@@ -135,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         duration = trajectory.duration if args.duration is None else args.duration
         physics_rate = check_number('--physics-rate', args.physics_rate, 0.0, low_inclusive=False)
         settle_time = check_number('--settle-time', args.settle_time, 0.0)
+        check_number('--extra-subscribers', args.extra_subscribers, 0.0, 100.0)
         topics = select_topics(args.topics)
         if duration <= settle_time:
             raise ParameterError(f'--duration: {duration:g} s leaves nothing after the settling window '

@@ -21,6 +21,9 @@ import yaml
 from .processes import NodeProcess, node_command, source_tree_environment, wait_for_exit
 
 
+EXTRA_SUBSCRIBER_DELAY = 1.0   #: [s, wall] the simulator waits once extra odom subscribers are there
+
+
 @dataclass
 class RosFlightConfig:
     namespace: str
@@ -41,6 +44,7 @@ class RosFlightConfig:
     gains_file: Path | None = None
     settle_time: float = 5.0
     quiet: bool = False
+    extra_odom_subscribers: int = 0   #: further odom subscribers the simulator waits for (e.g. a ros2 bag record)
     record: bool = True       #: False: no recorder process (for timing the bare three-node loop)
 
 
@@ -85,7 +89,10 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
         ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node',
          {'duration': config.duration, 'exit_at_end': True, 'disturbances': config.disturbances,
           'physics_rate': config.physics_rate, 'odometry_rate': config.control_rate, 'mode': config.mode,
-          'speed_factor': config.speed_factor, 'wait_for_subscribers': 2 if config.record else 1,
+          'speed_factor': config.speed_factor,
+          'wait_for_subscribers': (2 if config.record else 1) + config.extra_odom_subscribers,
+          # an outside recorder subscribes to odom among its other topics: give those time to match too
+          'start_delay': EXTRA_SUBSCRIBER_DELAY if config.extra_odom_subscribers else 0.0,
           'initial_state': config.initial_state, **vehicle}),
     ]
     if not config.record:

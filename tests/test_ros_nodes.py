@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import math
+import shutil
+import signal
 import subprocess
 import sys
 
@@ -328,3 +330,88 @@ def test_a_restarted_simulator_gets_a_fresh_controller_and_flies_the_same_flight
     assert len(first) == len(second) == 1000
     assert first[-1][2] > 0.05                      # it took off: the controller answered the new simulator
     assert np.abs(first - second).max() <= 1e-12    # ... from scratch: same forces, same flight
+
+
+def rosbag2_available() -> bool:
+    """``ros2 bag`` (rosbag2 with its MCAP storage plugin) is installed in the sourced ROS 2."""
+    if not HAVE_RCLPY or shutil.which('ros2') is None:
+        return False
+    return subprocess.run(['ros2', 'bag', 'record', '--help'], capture_output=True, timeout=60).returncode == 0
+
+
+@pytest.mark.skipif(not rosbag2_available(), reason='ros2 bag (rosbag2) is not installed in the sourced ROS 2')
+def test_ros2_bag_reads_our_bag_and_our_review_reads_a_ros2_bag_recording_of_the_same_flight(tmp_path):
+    """Issue 4 with real rosbag2: `ros2 bag info` of our bag; `ros2 bag record -s mcap` of a lockstep flight
+    (the simulator waits for it) reviewed by our reader to the same flight and metrics as our own recorder's bag."""
+    from flight_stack.ros_backend import RosFlightConfig, fly_ros
+    from quad_msgs_bridge.contract import RECORDED_TOPICS
+    from quad_msgs_bridge.flight_from_bag import read_flight
+    from quad_msgs_bridge.metrics import flight_metrics
+
+    namespace, duration, settle = 'rosbag2', 6.0, 5.0
+    theirs, ours, qos = tmp_path / 'theirs', tmp_path / 'ours', tmp_path / 'qos.yaml'
+    with open(qos, 'w') as overrides:   # without them rosbag2's history of 10 drops messages at lockstep rates
+        subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), 'rosbag2-qos', '--namespace', namespace],
+                       stdout=overrides, check=True)
+    ros2_bag = subprocess.Popen(['ros2', 'bag', 'record', '-s', 'mcap', '--qos-profile-overrides-path', str(qos),
+                                 '-o', str(theirs)]
+                                + [resolve(t, namespace) for t in RECORDED_TOPICS],
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        result = fly_ros(RosFlightConfig(
+            namespace=namespace, controller='nnit2fsmc', scenario='paper', duration=duration, disturbances=True,
+            seed=0, physics_rate=1000.0, control_rate=1000.0, initial_state=make_scenario('paper').initial_state,
+            bag=ours, topics=[t.name for t in RECORDED_TOPICS], settle_time=settle, quiet=True,
+            extra_odom_subscribers=1))
+    finally:
+        ros2_bag.send_signal(signal.SIGINT)
+        log, _ = ros2_bag.communicate(timeout=60)
+    assert result.failed_node is None, result
+    assert ros2_bag.returncode == 0, log
+
+    info = subprocess.run(['ros2', 'bag', 'info', str(ours)], capture_output=True, text=True, timeout=60)
+    assert info.returncode == 0, info.stderr
+    steps = round(duration * 1000)
+    for topic in RECORDED_TOPICS:
+        count = 1 if topic.qos.durability == 'transient_local' else steps
+        assert f'Topic: {resolve(topic, namespace)} | Type: {topic.type} | Count: {count} |' in info.stdout, info.stdout
+
+    mine, recorded_by_ros2_bag = read_flight(ours), read_flight(theirs, namespace=namespace, settle_time=settle)
+    assert len(recorded_by_ros2_bag.record.time) == len(mine.record.time) == steps
+    for field in ('time', 'position', 'forces', 'controls', 'corrective'):
+        assert np.array_equal(getattr(recorded_by_ros2_bag.record, field), getattr(mine.record, field)), field
+    params = mine.params
+    assert (flight_metrics(recorded_by_ros2_bag.record, settle, params.F_min, params.F_max)
+            == flight_metrics(mine.record, settle, params.F_min, params.F_max))
+
+
+def test_the_recorder_logs_in_sim_time_from_the_start(ros_node, tmp_path):
+    """A message that reaches the recorder before the first /clock is logged at sim time 0, not at wall time
+    (which would put it after the whole flight for a reader in log-time order)."""
+    from quad_msgs_bridge.bag_reader import mcap_file
+    from quad_msgs_bridge.contract import CLOCK
+    from quad_msgs_bridge.conversions import clock_msg
+    from mcap.reader import make_reader
+
+    namespace = 'logtime'
+    kit = rclpy_kit()
+    forces_pub = ros_node.create_publisher(kit[ROTOR_FORCES.type], resolve(ROTOR_FORCES, namespace),
+                                           qos_profile(ROTOR_FORCES.qos))
+    clock_pub = ros_node.create_publisher(kit[CLOCK.type], CLOCK.name, qos_profile(CLOCK.qos))
+    recorder = node_process('recorder', 'quad_msgs_bridge.recorder_node', namespace,
+                            {'bag': str(tmp_path / 'bag'), 'topics': ['rotor_forces', '/clock']})
+    try:
+        assert spin_until(ros_node, lambda: forces_pub.get_subscription_count() and clock_pub.get_subscription_count(),
+                          timeout=30.0)
+        forces_pub.publish(rotor_forces_msg(kit, [1.0, 1.0, 1.0, 1.0]))
+        spin_until(ros_node, lambda: False, timeout=0.5)
+        clock_pub.publish(clock_msg(kit, 2.5))
+        spin_until(ros_node, lambda: False, timeout=0.5)
+        forces_pub.publish(rotor_forces_msg(kit, [2.0, 2.0, 2.0, 2.0]))
+        spin_until(ros_node, lambda: False, timeout=0.5)
+    finally:
+        assert recorder.stop() == 0, '\n'.join(recorder.lines)
+    with open(mcap_file(tmp_path / 'bag'), 'rb') as stream:
+        logged = [(channel.topic, message.log_time) for _, channel, message in make_reader(stream).iter_messages()]
+    forces_topic = resolve(ROTOR_FORCES, namespace)
+    assert logged == [(forces_topic, 0), ('/clock', 2_500_000_000), (forces_topic, 2_500_000_000)]

@@ -1,9 +1,10 @@
 """record node: writes what goes over the contract topics into a rosbag2 MCAP bag.
 
 Messages are recorded as the serialized CDR bytes that arrived, with two times: the log time is
-the sim time of the latest ``/clock`` the recorder received (wall time before the first one), the
-publish time is the wall time the publisher sent it (DDS source timestamp), so a bag shows both
-the flight in sim time and the real message latencies.
+the sim time of the latest ``/clock`` the recorder received (0 before the first one, as a ROS clock
+under ``use_sim_time`` reads; wall time if ``/clock`` is not recorded), the publish time is the wall
+time the publisher sent it (DDS source timestamp), so a bag shows both the flight in sim time and
+the real message latencies.
 
 Per-step topics published by the controller must be discovered before ``odom`` is subscribed:
 a lockstep simulator that waits for the recorder's ``odom`` subscription then starts only when
@@ -56,7 +57,7 @@ class RecorderNode(Node):
         self.writer = BagWriter(bag, self.topics, namespace, custom_data=custom, overwrite=overwrite,
                                 queue_size=queue_size)
         self.kit = kit
-        self.clock_ns: int | None = None
+        self.clock_ns: int | None = 0 if CLOCK in self.topics else None    #: sim time of the latest /clock [ns]
         self.received = 0
         self.recorded: list = []
         for topic in self.topics:

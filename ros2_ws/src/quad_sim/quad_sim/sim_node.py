@@ -53,6 +53,10 @@ class SimNode(Node):
         self.wait_for_subscribers = declare(
             self, 'wait_for_subscribers', 1,
             'start once odom has this many subscribers (the controller, plus any recorder)', (1, 1000))
+        self.start_delay = declare(self, 'start_delay', 0.0,
+                                   'wall seconds to wait once the subscribers are there, before the first step '
+                                   '(a late recorder such as ros2 bag record then has all its topics matched)',
+                                   (0.0, 60.0))
         self.exit_at_end = declare(self, 'exit_at_end', False, 'shut the node down once duration is reached')
         start = declare(self, 'initial_state', [0.0] * 12,
                         'x y z [m] vx vy vz [m/s] phi theta psi [rad] dphi dtheta dpsi [rad/s], world ENU')
@@ -74,6 +78,7 @@ class SimNode(Node):
         self.forces_sub = subscription(self, kit, ROTOR_FORCES, self.on_forces, raw=True)
         self.last_forces_wall = time.monotonic()
         self.started = False
+        self.subscribed_since: float | None = None   #: wall time the start condition first held
         self.stale = False
         self.finished = False
         self.first_publish_wall: float | None = None
@@ -125,11 +130,18 @@ class SimNode(Node):
 
     # --- lockstep ---------------------------------------------------------------------------
     def ready(self) -> bool:
-        """Start once ``odom`` has its subscribers and a controller publishes ``rotor_forces``."""
-        if not self.started and (self.count_subscribers(ODOM.name) >= self.wait_for_subscribers
-                                 and self.count_publishers(ROTOR_FORCES.name) > 0):
+        """Start ``start_delay`` after ``odom`` has its subscribers and a controller publishes ``rotor_forces``."""
+        if self.started:
+            return True
+        now = time.monotonic()
+        if not (self.count_subscribers(ODOM.name) >= self.wait_for_subscribers
+                and self.count_publishers(ROTOR_FORCES.name) > 0):
+            self.subscribed_since = None
+        elif self.subscribed_since is None:
+            self.subscribed_since = now
+        if self.subscribed_since is not None and now - self.subscribed_since >= self.start_delay:
             self.started = True
-            self.last_forces_wall = time.monotonic()
+            self.last_forces_wall = now
         return self.started
 
     def lockstep_watchdog(self) -> None:
