@@ -83,7 +83,9 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
          {'use_sim_time': False, 'scenario': config.scenario, 'duration': config.duration,
           'setpoint_rate': config.setpoint_rate, 'start_time': 0.0}),
         ('controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller.controller_node',
-         {'use_sim_time': True, 'controller': config.controller, 'nnit2fsmc.seed': config.seed,
+         # it stamps with the odometry's stamp and reads no clock (its odometry watchdog runs on the steady
+         # clock): no use_sim_time either, which spares a /clock callback per step (11 % of the lockstep rate)
+         {'use_sim_time': False, 'controller': config.controller, 'nnit2fsmc.seed': config.seed,
           'latest_only': config.mode == 'realtime', **vehicle,
           **({'gains_file': str(config.gains_file)} if config.gains_file else {})}),
         ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node',
