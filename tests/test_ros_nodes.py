@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from ros_support import HAVE_RCLPY, ROOT, node_process, requires_ros, spin_until
+from ros_support import HAVE_RCLPY, ROOT, SKIP_REASON, node_process, requires_ros, spin_until
 
 pytestmark = [requires_ros, pytest.mark.ros]
 
@@ -339,7 +339,8 @@ def rosbag2_available() -> bool:
     return subprocess.run(['ros2', 'bag', 'record', '--help'], capture_output=True, timeout=60).returncode == 0
 
 
-@pytest.mark.skipif(not rosbag2_available(), reason='ros2 bag (rosbag2) is not installed in the sourced ROS 2')
+@pytest.mark.skipif(not rosbag2_available(), reason=SKIP_REASON if not HAVE_RCLPY else
+                    'ros2 bag (rosbag2 with its MCAP storage) is not installed in the sourced ROS 2')
 def test_ros2_bag_reads_our_bag_and_our_review_reads_a_ros2_bag_recording_of_the_same_flight(tmp_path):
     """Issue 4 with real rosbag2: `ros2 bag info` of our bag; `ros2 bag record -s mcap` of a lockstep flight
     (the simulator waits for it) reviewed by our reader to the same flight and metrics as our own recorder's bag."""
