@@ -10,7 +10,7 @@ Examples:
   python3 run_stack.py                                   # the paper's flight, NNIT2FSMC
   python3 run_stack.py --controller smc-sign --no-disturbances --out out/sign
 
-Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover`:
+Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
   python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
   python3 run_stack.py recover BAG                       # finalize the bag of a killed recording
   python3 run_stack.py rosbag2-qos --namespace quad > qos.yaml   # for your own `ros2 bag record

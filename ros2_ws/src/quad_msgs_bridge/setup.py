@@ -25,5 +25,6 @@ setup(
         'record = quad_msgs_bridge.recorder_node:main',
         'review = quad_msgs_bridge.review:main',
         'recover = quad_msgs_bridge.bag_recover:recover_main',
+        'rosbag2_qos = quad_msgs_bridge.bag_metadata:qos_overrides_main',
     ]},
 )

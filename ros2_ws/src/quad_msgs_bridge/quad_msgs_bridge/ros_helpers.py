@@ -18,7 +18,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-from .contract import QosSpec, TopicSpec, resolve
+from .contract import QosSpec, TopicSpec
 from .conversions import MessageKit, rclpy_kit
 from .vehicle_params import ParameterError
 
@@ -74,10 +74,6 @@ def declare(node: Node, name: str, default: Any, description: str,
     if bounds is not None and isinstance(value, float) and not math.isfinite(value):
         raise ParameterError(f'parameter {name}: {value} is not finite;{range_text}')
     return value
-
-
-def topic_name(node: Node, topic: TopicSpec) -> str:
-    return resolve(topic, node.get_namespace())
 
 
 def init_ros(argv: list[str] | None = None) -> list[int]:
