@@ -114,8 +114,6 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
             failed = dead.name
         elif sim.returncode != 0:
             failed = sim.name
-        else:
-            time.sleep(0.2)   # let the last answers reach the recorder (it also drains when stopped)
     except (KeyboardInterrupt, TimeoutError) as stop:
         failed = 'interrupted' if isinstance(stop, KeyboardInterrupt) else f'timeout ({stop})'
     finally:
