@@ -247,3 +247,27 @@ def test_sign_and_saturated_switching():
     assert [sign.switching(s) for s in (-0.5, 0.0, 1e-12)] == [-1, 0, 1]
     saturated = SlidingModeLaw(2.0, 1.0, boundary_layer=0.1)
     assert [saturated.switching(s) for s in (-1.0, -0.05, 0.0, 0.02, 3.0)] == pytest.approx([-1, -0.5, 0, 0.2, 1])
+
+
+def test_adapt_only_moves_the_learning_step():
+    """Taking the learning with adapt() right after an update (the node does, after sending the forces)
+    gives the same flight as leaving it to the next update; and the step is really taken by adapt()."""
+    rng = np.random.default_rng(11)
+    deferred, eager = build_controller('nnit2fsmc', PARAMS, GAINS), build_controller('nnit2fsmc', PARAMS, GAINS)
+    state = [0.02, -0.01, 0.99, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    reference = hold((0.0, 0.0, 1.0))
+    for k in range(200):
+        noisy = [v + float(rng.normal(0.0, 1e-3)) for v in state]
+        expected = deferred.update(k * 1e-3, noisy, reference)
+        got = eager.update(k * 1e-3, noisy, reference)
+        assert got == expected
+        before = network_weights(eager)
+        eager.adapt()
+        if any(abs(a.surface) < deferred.laws[axis].fuzzy.input_scale for axis, a in got.axes.items()):
+            assert network_weights(eager) != before, f'step {k}: adapt() learned nothing'
+        learned = network_weights(eager)
+        eager.adapt()                                  # a second call has nothing left to learn
+        assert network_weights(eager) == learned
+    assert network_weights(eager) != network_weights(deferred)   # eager is one learning step ahead
+    deferred.adapt()
+    assert network_weights(eager) == network_weights(deferred)

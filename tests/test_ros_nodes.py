@@ -119,6 +119,12 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
     for control, value in live['chattering'].items():
         assert from_ros['chattering'][control] == pytest.approx(value, abs=1e-9), control
 
+    from mcap.reader import make_reader
+    from quad_msgs_bridge.bag_reader import mcap_file
+    with open(mcap_file(tmp_path / 'ros'), 'rb') as stream:    # in the order the recorder wrote them
+        log_times = [m.log_time for _, _, m in make_reader(stream).iter_messages(log_time_order=False)]
+    assert log_times == sorted(log_times) and log_times[-1] <= round(duration * 1e9)
+
     ros_payloads, embedded_payloads = payloads(tmp_path / 'ros', 'equal'), payloads(tmp_path / 'embedded', 'equal')
     assert set(ros_payloads) == set(embedded_payloads) == {t.name for t in RECORDED_TOPICS}
     for topic, messages in embedded_payloads.items():

@@ -1,9 +1,12 @@
 """Per-subsystem control laws, one instance for each of x, y, z, phi, theta, psi.
 
-Every law answers ``update(e, de, ref_vel, ref_acc, drift, gain)`` where, for the subsystem's
+Every law answers ``update(e, de, ref_vel, ref_acc, drift, gain)`` (and ``adapt()``, below) where, for the subsystem's
 second-order dynamics  q'' = drift + gain * v  (drift and gain from the nominal model, see
 :mod:`nnit2fsmc_controller.controller`), e = q - q_d, de = q' - q_d', ref_vel = q_d',
 ref_acc = q_d'' and v is the virtual control the law returns. All laws use the paper's sliding surface S = de + lambda e (eq. 3, 11).
+``adapt()`` takes the online learning step of the last update, if the law learns; ``update`` takes
+a step still pending first, so calling ``adapt`` only moves the work to a moment of the caller's
+choosing (the controller node: after the rotor forces are on their way).
 
 * :class:`NNIT2FSMCLaw`: the paper's controller. Model-free: it ignores drift and gain;
   v = U_eq_hat (neural network) + U_fuzzy (IT2 fuzzy corrective term), the network learning online.
@@ -52,14 +55,21 @@ class NNIT2FSMCLaw:
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
         self.fuzzy = fuzzy
         self.network = network
+        self._teaching: float | None = None   #: fuzzy term the network has yet to learn from
 
     def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
+        self.adapt()
         surface = de + self.lam * e
         corrective = self.fuzzy(surface)
         equivalent = self.network.forward((ref_vel, ref_acc, 1.0))
-        if abs(surface) < self.fuzzy.input_scale:
-            self.network.learn(corrective)
+        self._teaching = corrective if abs(surface) < self.fuzzy.input_scale else None
         return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
+
+    def adapt(self) -> None:
+        """The network's learning step (eqs. 6-9) from the last update's fuzzy term, if not taken yet."""
+        if self._teaching is not None:
+            self.network.learn(self._teaching)
+            self._teaching = None
 
 
 class SlidingModeLaw:
@@ -75,6 +85,9 @@ class SlidingModeLaw:
         if self.boundary_layer > 0.0:
             return max(-1.0, min(1.0, surface / self.boundary_layer))
         return 1.0 if surface > 0.0 else -1.0 if surface < 0.0 else 0.0   # also for numpy scalars
+
+    def adapt(self) -> None:
+        """Nothing to learn."""
 
     def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
         surface = de + self.lam * e
@@ -94,6 +107,9 @@ class PIDLaw:
         self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.integral = 0.0
+
+    def adapt(self) -> None:
+        """Nothing to learn (the integral is part of the update)."""
 
     def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
         limit = self.integral_limit

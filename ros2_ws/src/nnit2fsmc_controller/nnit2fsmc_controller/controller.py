@@ -133,6 +133,15 @@ class CascadedController:
             axes={'x': out_x, 'y': out_y, 'z': out_z, 'phi': out_phi, 'theta': out_theta, 'psi': out_psi},
             attitude_reference=(phi_d, theta_d, psi_d))
 
+    def adapt(self) -> None:
+        """Take the online learning of the last update now rather than at the start of the next one.
+
+        The forces of an update do not depend on its learning step, so a caller that has sent them
+        can learn while the vehicle moves: in lockstep this takes the learning off the critical path.
+        """
+        for law in self.laws.values():
+            law.adapt()
+
     def attitude_from_accelerations(self, ax: float, ay: float, psi: float) -> tuple[float, float]:
         """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi."""
         norm = math.hypot(ax, ay)

@@ -3,7 +3,8 @@
 Each odometry at sim time t is answered once, with the reference for that same instant t taken
 from the ``setpoints`` path (or from the transfer to the last ``goal_pose``). Per answer it
 publishes ``rotor_forces`` first (the simulator can go on integrating), then ``control/wrench``,
-``control/reference`` and ``control/diagnostics``, all stamped t.
+``control/reference`` and ``control/diagnostics``, all stamped t, and only then takes the NN's
+learning step of that update (the forces do not depend on it).
 
 Failure behaviour: odometry that arrives before any setpoint is held and answered when the first
 setpoints arrive; a repeated odometry (the stamp last answered) is ignored; an older stamp means
@@ -136,6 +137,7 @@ class ControllerNode(Node):
         self.reference_pub.publish(self.encode_reference(sec, nanosec, reference.position, reference.yaw))
         self.diagnostics_pub.publish(self.encode_diagnostics(
             [a.surface for a in axes], [a.equivalent for a in axes], [a.corrective for a in axes]))
+        self.controller.adapt()   # learn while the simulator integrates, not when the next odometry waits
 
     def restart(self, stamp_ns: int) -> None:
         """Sim time went back (a restarted or reset simulator): a new flight gets a fresh controller."""

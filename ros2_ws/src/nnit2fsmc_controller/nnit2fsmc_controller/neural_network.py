@@ -66,12 +66,20 @@ class EquivalentControlNetwork:
         return grad_output, grad_hidden
 
     def learn(self, u_fuzzy: float) -> None:
-        """One gradient step, eqs. (6) and (7), then projection of every weight onto its bounds."""
+        """One gradient step, eqs. (6) and (7), then projection of every weight onto its bounds.
+
+        The gradients of :meth:`gradients`, computed term by term in the same order (so to the same
+        bits) inside the update loop: the step runs once per subsystem and control step, and building
+        the gradient lists first cost a third of it.
+        """
         if self.learning_rate == 0.0:
             return
-        grad_output, grad_hidden = self.gradients(u_fuzzy)
         alpha, limit = self.learning_rate, self.weight_limit
-        self.output_weights = [min(limit, max(-limit, w - alpha * g))
-                               for w, g in zip(self.output_weights, grad_output)]
-        self.hidden_weights = [[min(limit, max(-limit, w - alpha * g)) for w, g in zip(row, grads)]
-                               for row, grads in zip(self.hidden_weights, grad_hidden)]
+        common = u_fuzzy * self.output_gain * (1.0 - self._output * self._output)
+        inputs, output_weights = self._inputs, self.output_weights
+        for j, (y, row) in enumerate(zip(self._hidden, self.hidden_weights)):
+            wy = output_weights[j]
+            hidden_factor = -0.25 * common * wy * (1.0 - y * y)     # dE/dWz[j][i] = hidden_factor * Z_i
+            for i, z in enumerate(inputs):
+                row[i] = min(limit, max(-limit, row[i] - alpha * (hidden_factor * z)))
+            output_weights[j] = min(limit, max(-limit, wy - alpha * (-0.5 * common * y)))
