@@ -78,15 +78,21 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 @contextlib.contextmanager
-def sigterm_as_interrupt():
-    """SIGTERM stops the flight like Ctrl-C (KeyboardInterrupt), so the bag is closed either way."""
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt(f'signal {signum}')
-    previous = signal.signal(signal.SIGTERM, interrupt)
+def stop_signals():
+    """SIGINT (Ctrl-C) and SIGTERM, noted rather than raised: yields ``stop()``, true once one came.
+
+    The embedded flight checks it between two control steps, so a signal never lands in the
+    middle of a message being added to the bag (a KeyboardInterrupt there once left a message
+    counted in the bag's index that was not in its chunk).
+    """
+    received: list[int] = []
+    previous = {number: signal.signal(number, lambda signum, frame: received.append(signum))
+                for number in (signal.SIGINT, signal.SIGTERM)}
     try:
-        yield
+        yield lambda: bool(received)
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for number, handler in previous.items():
+            signal.signal(number, handler)
 
 
 def choose_backend(requested: str) -> str:
@@ -167,14 +173,14 @@ def main(argv: list[str] | None = None) -> int:
         record, wall_time_s, extra = flown
     else:
         try:
-            with sigterm_as_interrupt():
+            with stop_signals() as stop:
                 recording = (FlightBag.create(bag_path, params, settle_time, topics=topics, overwrite=True,
                                               controller=args.controller, scenario=args.scenario, backend=backend,
                                               seed=args.seed)
                              if bag_path else contextlib.nullcontext())
                 with recording as bag:
                     result = fly_embedded(args.controller, trajectory, params, disturbances, gains, duration,
-                                          physics_rate, progress=not args.quiet, bag=bag)
+                                          physics_rate, progress=not args.quiet, bag=bag, stop=stop)
         except KeyboardInterrupt:
             print('interrupted' + (f'; bag closed: {bag_path}' if bag_path else ''), file=sys.stderr)
             return 130

@@ -10,6 +10,7 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass
+from typing import Callable
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
 from quad_msgs_bridge.flight_bag import FlightBag
@@ -41,10 +42,13 @@ def setpoint_path(path: SetpointPath) -> SetpointPath:
 
 def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, disturbances: Disturbances,
                  gains: dict, duration: float, physics_rate: float, setpoint_rate: float = 50.0,
-                 progress: bool = False, bag: FlightBag | None = None) -> FlightResult:
+                 progress: bool = False, bag: FlightBag | None = None,
+                 stop: Callable[[], bool] | None = None) -> FlightResult:
     """Fly ``trajectory`` for ``duration`` [s] of sim time; one record row per control step.
 
     With ``bag`` every step's contract messages are recorded too (the caller closes the bag).
+    ``stop`` is asked between two control steps: once it returns true the flight raises
+    KeyboardInterrupt, with every step so far complete in the bag.
     """
     controller = build_controller(controller_kind, params, gains)
     published = published_path(trajectory, setpoint_rate)
@@ -62,6 +66,8 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     if bag is not None:
         bag.record_setpoints(published)
     for k in range(steps):
+        if stop is not None and stop():
+            raise KeyboardInterrupt(f'stopped after {k} control steps')
         odometry = simulator.odometry()
         t = odometry.stamp
         state = state_from_odometry(odometry)
