@@ -1,10 +1,10 @@
 """Per-subsystem control laws, one instance for each of x, y, z, phi, theta, psi.
 
-Every law answers ``update(e, de, ref_vel, ref_acc, drift, gain)`` (and ``adapt()``, below) where, for the subsystem's
+Every law answers ``update(e, de, ref_vel, ref_acc, drift, gain)`` where, for the subsystem's
 second-order dynamics  q'' = drift + gain * v  (drift and gain from the nominal model, see
 :mod:`nnit2fsmc_controller.controller`), e = q - q_d, de = q' - q_d', ref_vel = q_d',
-ref_acc = q_d'' and v is the virtual control the law returns. All laws use the paper's sliding surface S = de + lambda e (eq. 3, 11).
-``adapt()`` takes the online learning step of the last update, if the law learns; ``update`` takes
+ref_acc = q_d'' and v is the virtual control the law returns. All laws use the paper's sliding
+surface S = de + lambda e (eq. 3, 11). ``adapt()`` takes the online learning step of the last update, if the law learns; ``update`` takes
 a step still pending first, so calling ``adapt`` only moves the work to a moment of the caller's
 choosing (the controller node: after the rotor forces are on their way).
 
