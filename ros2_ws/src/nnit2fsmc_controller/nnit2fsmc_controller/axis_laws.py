@@ -4,9 +4,10 @@ Every law answers ``update(e, de, ref_vel, ref_acc, drift, gain)`` where, for th
 second-order dynamics  q'' = drift + gain * v  (drift and gain from the nominal model, see
 :mod:`nnit2fsmc_controller.controller`), e = q - q_d, de = q' - q_d', ref_vel = q_d',
 ref_acc = q_d'' and v is the virtual control the law returns. All laws use the paper's sliding
-surface S = de + lambda e (eq. 3, 11). ``adapt()`` takes the online learning step of the last update, if the law learns; ``update`` takes
-a step still pending first, so calling ``adapt`` only moves the work to a moment of the caller's
-choosing (the controller node: after the rotor forces are on their way).
+surface S = de + lambda e (eq. 3, 11). ``adapt()`` takes the online learning step of the last
+update, if the law learns; ``update`` takes a step still pending first, so calling ``adapt`` only
+moves the work to a moment of the caller's choosing (the controller node: after the rotor forces
+are on their way).
 
 * :class:`NNIT2FSMCLaw`: the paper's controller. Model-free: it ignores drift and gain;
   v = U_eq_hat (neural network) + U_fuzzy (IT2 fuzzy corrective term), the network learning online.
