@@ -9,6 +9,7 @@ import sys
 
 import numpy as np
 import pytest
+from mcap.reader import make_reader
 
 from ros_support import HAVE_RCLPY, ROOT, SKIP_REASON, node_process, requires_ros, spin_until
 
@@ -20,6 +21,7 @@ if HAVE_RCLPY:
 
     from quad_msgs_bridge.ros_helpers import qos_profile
 
+from quad_msgs_bridge.bag_reader import mcap_file
 from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
                                        REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, resolve)
 from quad_msgs_bridge.conversions import odometry_from_msg, odometry_msg, pose_stamped_msg, rclpy_kit, rotor_forces_msg
@@ -73,14 +75,18 @@ def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
     assert len(received['setpoints'].points) > 1
 
 
+def recorded(bag, topics=None) -> list:
+    """(topic, MCAP message) of a bag's ``topics`` (default all), in the order they were written."""
+    with open(mcap_file(bag), 'rb') as stream:
+        return [(channel.topic, message)
+                for _, channel, message in make_reader(stream).iter_messages(topics=topics, log_time_order=False)]
+
+
 def payloads(bag, namespace):
     """{topic relative to the namespace: [CDR bytes, in order]} of a bag."""
-    from mcap.reader import make_reader
-    from quad_msgs_bridge.bag_reader import mcap_file
     topics = {}
-    with open(mcap_file(bag), 'rb') as stream:
-        for _, channel, message in make_reader(stream).iter_messages(log_time_order=False):
-            topics.setdefault(channel.topic.removeprefix(f'/{namespace}/'), []).append(bytes(message.data))
+    for topic, message in recorded(bag):
+        topics.setdefault(topic.removeprefix(f'/{namespace}/'), []).append(bytes(message.data))
     return topics
 
 
@@ -119,10 +125,7 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
     for control, value in live['chattering'].items():
         assert from_ros['chattering'][control] == pytest.approx(value, abs=1e-9), control
 
-    from mcap.reader import make_reader
-    from quad_msgs_bridge.bag_reader import mcap_file
-    with open(mcap_file(tmp_path / 'ros'), 'rb') as stream:    # in the order the recorder wrote them
-        log_times = [m.log_time for _, _, m in make_reader(stream).iter_messages(log_time_order=False)]
+    log_times = [message.log_time for _, message in recorded(tmp_path / 'ros')]
     assert log_times == sorted(log_times) and log_times[-1] <= round(duration * 1e9)
 
     ros_payloads, embedded_payloads = payloads(tmp_path / 'ros', 'equal'), payloads(tmp_path / 'embedded', 'equal')
@@ -268,15 +271,10 @@ def test_non_finite_input_is_answered_with_finite_forces_and_the_bad_message_is_
 
 def odometry_stamps_and_publish_times(bag, namespace) -> tuple[np.ndarray, np.ndarray]:
     """Header stamps and publish (send, wall) times [s] of the odometry recorded in ``bag``."""
-    from mcap.reader import make_reader
-    from quad_msgs_bridge.bag_reader import mcap_file
     from quad_msgs_bridge.fast_cdr import decode_odometry
-    stamps, sent = [], []
-    with open(mcap_file(bag), 'rb') as stream:
-        for _, _, message in make_reader(stream).iter_messages(topics=[resolve(ODOM, namespace)]):
-            stamps.append(decode_odometry(message.data).stamp)
-            sent.append(message.publish_time * 1e-9)
-    return np.array(stamps), np.array(sent)
+    messages = [message for _, message in recorded(bag, [resolve(ODOM, namespace)])]
+    return (np.array([decode_odometry(message.data).stamp for message in messages]),
+            np.array([message.publish_time * 1e-9 for message in messages]))
 
 
 def test_realtime_mode_never_runs_ahead_of_the_wall_clock_and_holds_hover(tmp_path):
@@ -395,10 +393,8 @@ def test_ros2_bag_reads_our_bag_and_our_review_reads_a_ros2_bag_recording_of_the
 def test_the_recorder_logs_in_sim_time_from_the_start(ros_node, tmp_path):
     """A message that reaches the recorder before the first /clock is logged at sim time 0, not at wall time
     (which would put it after the whole flight for a reader in log-time order)."""
-    from quad_msgs_bridge.bag_reader import mcap_file
     from quad_msgs_bridge.contract import CLOCK
     from quad_msgs_bridge.conversions import clock_msg
-    from mcap.reader import make_reader
 
     namespace = 'logtime'
     kit = rclpy_kit()
@@ -418,7 +414,6 @@ def test_the_recorder_logs_in_sim_time_from_the_start(ros_node, tmp_path):
         spin_until(ros_node, lambda: False, timeout=0.5)
     finally:
         assert recorder.stop() == 0, '\n'.join(recorder.lines)
-    with open(mcap_file(tmp_path / 'bag'), 'rb') as stream:
-        logged = [(channel.topic, message.log_time) for _, channel, message in make_reader(stream).iter_messages()]
+    logged = [(topic, message.log_time) for topic, message in recorded(tmp_path / 'bag')]
     forces_topic = resolve(ROTOR_FORCES, namespace)
     assert logged == [(forces_topic, 0), ('/clock', 2_500_000_000), (forces_topic, 2_500_000_000)]
