@@ -31,14 +31,14 @@ from flight_stack.ros_backend import RosFlightConfig, fly_ros
 from flight_stack.summary import build_summary, format_summary, write_summary
 from nnit2fsmc_controller.factory import CONTROLLERS, control_period, load_gains
 from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
-from quad_msgs_bridge.bag_metadata import qos_overrides_main
-from quad_msgs_bridge.bag_recover import recover_main
-from quad_msgs_bridge.bag_timing import message_timing
+from quad_msgs_bridge.bag.metadata import qos_overrides_main
+from quad_msgs_bridge.bag.recover import recover_main
+from quad_msgs_bridge.bag.timing import message_timing
 from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS
-from quad_msgs_bridge.flight_bag import FlightBag, select_topics
-from quad_msgs_bridge.flight_from_bag import read_flight
-from quad_msgs_bridge.mcap_file import BagWriteError
-from quad_msgs_bridge.review import main as review_main, review_bags
+from quad_msgs_bridge.bag.flight_bag import FlightBag, select_topics
+from quad_msgs_bridge.review.flight_from_bag import read_flight
+from quad_msgs_bridge.bag.mcap_file import BagWriteError
+from quad_msgs_bridge.review.command import main as review_main, review_bags
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number, load_vehicle_file
 
 

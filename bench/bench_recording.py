@@ -29,10 +29,10 @@ from mcap.writer import CompressionType, Writer  # noqa: E402
 from nnit2fsmc_controller.factory import load_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
 from quad_msgs_bridge import fast_cdr  # noqa: E402
-from quad_msgs_bridge.bag_writer import jazzy_typestore  # noqa: E402
+from quad_msgs_bridge.bag.writer import jazzy_typestore  # noqa: E402
 from quad_msgs_bridge.conversions import odometry_msg, rosbags_kit, rotor_forces_msg, wrench_msg  # noqa: E402
-from quad_msgs_bridge.flight_bag import FlightBag  # noqa: E402
-from quad_msgs_bridge.mcap_file import McapFileWriter  # noqa: E402
+from quad_msgs_bridge.bag.flight_bag import FlightBag  # noqa: E402
+from quad_msgs_bridge.bag.mcap_file import McapFileWriter  # noqa: E402
 from quad_msgs_bridge.state import OdometrySample  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
 

@@ -27,12 +27,12 @@ from flight_stack.embedded import fly_embedded  # noqa: E402
 from flight_stack.ros_backend import RosFlightConfig, fly_ros  # noqa: E402
 from nnit2fsmc_controller.factory import load_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
-from quad_msgs_bridge.bag_reader import mcap_file  # noqa: E402
+from quad_msgs_bridge.bag.reader import mcap_file  # noqa: E402
 from quad_msgs_bridge.contract import ODOM, RECORDED_TOPICS, resolve  # noqa: E402
 from quad_msgs_bridge.fast_cdr import decode_odometry  # noqa: E402
-from quad_msgs_bridge.flight_bag import FlightBag  # noqa: E402
-from quad_msgs_bridge.flight_from_bag import read_flight  # noqa: E402
-from quad_msgs_bridge.metrics import flight_metrics  # noqa: E402
+from quad_msgs_bridge.bag.flight_bag import FlightBag  # noqa: E402
+from quad_msgs_bridge.review.flight_from_bag import read_flight  # noqa: E402
+from quad_msgs_bridge.review.metrics import flight_metrics  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
 
 NAMESPACE = 'bench'

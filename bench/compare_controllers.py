@@ -3,7 +3,7 @@
 
 Flies nnit2fsmc, smc-sign, smc-sat and pid on the paper's 60 s helix through the embedded backend
 (the same code path as ``run_stack.py --backend embedded``), with the section IV disturbances on
-and off, and prints a Markdown table of the metrics of :func:`quad_msgs_bridge.metrics.flight_metrics`
+and off, and prints a Markdown table of the metrics of :func:`quad_msgs_bridge.review.metrics.flight_metrics`
 after the settling time, the ratios behind the paper's central claim and the issue's checks.
 
     .venv/bin/python bench/compare_controllers.py --out docs/results.md
@@ -23,7 +23,7 @@ import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on t
 from flight_stack.embedded import fly_embedded  # noqa: E402
 from nnit2fsmc_controller.factory import CONTROLLERS, load_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
-from quad_msgs_bridge.metrics import SUBSYSTEMS, flight_metrics  # noqa: E402
+from quad_msgs_bridge.review.metrics import SUBSYSTEMS, flight_metrics  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
 
 CONTROLS = ('U1', 'U2', 'U3', 'U4')

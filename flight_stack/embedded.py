@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from typing import Callable
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
-from quad_msgs_bridge.flight_bag import FlightBag
-from quad_msgs_bridge.metrics import FlightRecord, FlightRecorder
+from quad_msgs_bridge.bag.flight_bag import FlightBag
+from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams

@@ -74,7 +74,7 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     env = source_tree_environment()
     vehicle = {'vehicle_file': str(config.vehicle_file)} if config.vehicle_file else {}
     nodes = [
-        ('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.recorder_node',
+        ('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.bag.recorder_node',
          {'bag': str(config.bag), 'overwrite': True, 'topics': config.topics, 'controller': config.controller,
           'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time, **vehicle}),
         ('trajectory', 'nnit2fsmc_controller', 'trajectory', 'nnit2fsmc_controller.trajectory_node',

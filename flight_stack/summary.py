@@ -5,7 +5,7 @@ import dataclasses
 import json
 from pathlib import Path
 
-from quad_msgs_bridge.metrics import FlightRecord, flight_metrics
+from quad_msgs_bridge.review.metrics import FlightRecord, flight_metrics
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 

@@ -8,8 +8,8 @@ from flight_stack.embedded import FlightResult, fly_embedded
 from nnit2fsmc_controller.factory import load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.contract import RECORDED_TOPICS
-from quad_msgs_bridge.flight_bag import FlightBag
-from quad_msgs_bridge.metrics import flight_metrics
+from quad_msgs_bridge.bag.flight_bag import FlightBag
+from quad_msgs_bridge.review.metrics import flight_metrics
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 PARAMS, DISTURBANCES = load_vehicle_file()

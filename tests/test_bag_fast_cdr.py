@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from quad_msgs_bridge import fast_cdr
-from quad_msgs_bridge.bag_writer import jazzy_typestore
+from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.conversions import (clock_msg, diagnostics_msg, odometry_msg, pose_stamped_msg, rosbags_kit,
                                           rotor_forces_msg, wrench_msg)
 from quad_msgs_bridge.frames import quaternion_from_euler

@@ -13,8 +13,8 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
 from bag_support import PARAMS, fly_recorded
-from quad_msgs_bridge.bag_reader import mcap_file
-from quad_msgs_bridge.bag_writer import jazzy_typestore
+from quad_msgs_bridge.bag.reader import mcap_file
+from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM,
                                        RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, resolve)
 from quad_msgs_bridge.conversions import (diagnostics_from_msg, odometry_from_msg, path_msg, rosbags_kit,

@@ -14,9 +14,9 @@ from mcap.reader import NonSeekingReader
 from mcap.records import Message
 from rosbags.highlevel import AnyReader
 
-from quad_msgs_bridge.bag_metadata import read_metadata
-from quad_msgs_bridge.bag_reader import McapPrefix, is_finalized, mcap_file
-from quad_msgs_bridge.review import review_bags
+from quad_msgs_bridge.bag.metadata import read_metadata
+from quad_msgs_bridge.bag.reader import McapPrefix, is_finalized, mcap_file
+from quad_msgs_bridge.review.command import review_bags
 
 ROOT = Path(__file__).resolve().parent.parent
 STARTUP_TIMEOUT = 60.0

@@ -10,14 +10,14 @@ from pathlib import Path
 import pytest
 from rosbags.highlevel import AnyReader
 
-from quad_msgs_bridge import mcap_file
-from quad_msgs_bridge.bag_metadata import read_metadata
-from quad_msgs_bridge.bag_reader import BagReadError, McapPrefix, is_finalized
-from quad_msgs_bridge.bag_recover import recover, recover_main
-from quad_msgs_bridge.bag_writer import BagWriter
+from quad_msgs_bridge.bag import mcap_file
+from quad_msgs_bridge.bag.metadata import read_metadata
+from quad_msgs_bridge.bag.reader import BagReadError, McapPrefix, is_finalized
+from quad_msgs_bridge.bag.recover import recover, recover_main
+from quad_msgs_bridge.bag.writer import BagWriter
 from quad_msgs_bridge.contract import CLOCK, ODOM
 from quad_msgs_bridge.fast_cdr import clock_encoder, odometry_encoder
-from quad_msgs_bridge.mcap_file import BagWriteError, McapFileWriter
+from quad_msgs_bridge.bag.mcap_file import BagWriteError, McapFileWriter
 from quad_msgs_bridge.state import OdometrySample
 
 TOPICS = (ODOM, CLOCK)

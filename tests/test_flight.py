@@ -17,7 +17,7 @@ import pytest
 from flight_stack.embedded import fly_embedded
 from nnit2fsmc_controller.factory import load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
-from quad_msgs_bridge.metrics import SUBSYSTEMS, flight_metrics
+from quad_msgs_bridge.review.metrics import SUBSYSTEMS, flight_metrics
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 pytestmark = pytest.mark.slow

@@ -12,13 +12,13 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 
 import run_stack
 from bag_support import PARAMS, SETTLE_TIME, fly_recorded
-from quad_msgs_bridge.bag_reader import BagReadError
-from quad_msgs_bridge.bag_writer import jazzy_typestore
+from quad_msgs_bridge.bag.reader import BagReadError
+from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM,
                                        ROTOR_FORCES, resolve)
 from quad_msgs_bridge.conversions import (clock_msg, diagnostics_msg, odometry_msg, pose_stamped_msg, rosbags_kit,
                                           rotor_forces_msg, wrench_msg)
-from quad_msgs_bridge.review import PLOT_HINT, main as review_main, review_bags
+from quad_msgs_bridge.review.command import PLOT_HINT, main as review_main, review_bags
 
 ROOT = Path(__file__).resolve().parent.parent
 PLOTS = {'path_3d.png', 'tracking.png', 'controls.png', 'controls_zoom.png', 'surfaces.png', 'fuzzy_share.png'}

@@ -21,7 +21,7 @@ if HAVE_RCLPY:
 
     from quad_msgs_bridge.ros_helpers import qos_profile
 
-from quad_msgs_bridge.bag_reader import mcap_file
+from quad_msgs_bridge.bag.reader import mcap_file
 from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
                                        REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, resolve)
 from quad_msgs_bridge.conversions import odometry_from_msg, odometry_msg, pose_stamped_msg, rclpy_kit, rotor_forces_msg
@@ -96,9 +96,9 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
     from flight_stack.ros_backend import RosFlightConfig, fly_ros
     from nnit2fsmc_controller.factory import load_gains
     from quad_msgs_bridge.contract import RECORDED_TOPICS
-    from quad_msgs_bridge.flight_bag import FlightBag
-    from quad_msgs_bridge.flight_from_bag import read_flight
-    from quad_msgs_bridge.metrics import flight_metrics
+    from quad_msgs_bridge.bag.flight_bag import FlightBag
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
+    from quad_msgs_bridge.review.metrics import flight_metrics
     from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
     duration, settle = 7.0, 5.0
@@ -139,7 +139,7 @@ def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
     import signal
     import time
     from flight_stack.processes import source_tree_environment
-    from quad_msgs_bridge.flight_from_bag import read_flight
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
 
     bag = tmp_path / 'bag'
     stack = subprocess.Popen(
@@ -279,9 +279,9 @@ def odometry_stamps_and_publish_times(bag, namespace) -> tuple[np.ndarray, np.nd
 
 def test_realtime_mode_never_runs_ahead_of_the_wall_clock_and_holds_hover(tmp_path):
     from flight_stack.ros_backend import RosFlightConfig, fly_ros
-    from quad_msgs_bridge.bag_timing import message_timing
+    from quad_msgs_bridge.bag.timing import message_timing
     from quad_msgs_bridge.contract import RECORDED_TOPICS
-    from quad_msgs_bridge.flight_from_bag import read_flight
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
 
     duration = 4.0
     hover = make_scenario('hover', duration)
@@ -350,8 +350,8 @@ def test_ros2_bag_reads_our_bag_and_our_review_reads_a_ros2_bag_recording_of_the
     (the simulator waits for it) reviewed by our reader to the same flight and metrics as our own recorder's bag."""
     from flight_stack.ros_backend import RosFlightConfig, fly_ros
     from quad_msgs_bridge.contract import RECORDED_TOPICS
-    from quad_msgs_bridge.flight_from_bag import read_flight
-    from quad_msgs_bridge.metrics import flight_metrics
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
+    from quad_msgs_bridge.review.metrics import flight_metrics
 
     namespace, duration, settle = 'rosbag2', 6.0, 5.0
     theirs, ours, qos = tmp_path / 'theirs', tmp_path / 'ours', tmp_path / 'qos.yaml'
@@ -401,7 +401,7 @@ def test_the_recorder_logs_in_sim_time_from_the_start(ros_node, tmp_path):
     forces_pub = ros_node.create_publisher(kit[ROTOR_FORCES.type], resolve(ROTOR_FORCES, namespace),
                                            qos_profile(ROTOR_FORCES.qos))
     clock_pub = ros_node.create_publisher(kit[CLOCK.type], CLOCK.name, qos_profile(CLOCK.qos))
-    recorder = node_process('recorder', 'quad_msgs_bridge.recorder_node', namespace,
+    recorder = node_process('recorder', 'quad_msgs_bridge.bag.recorder_node', namespace,
                             {'bag': str(tmp_path / 'bag'), 'topics': ['rotor_forces', '/clock']})
     try:
         assert spin_until(ros_node, lambda: forces_pub.get_subscription_count() and clock_pub.get_subscription_count(),

@@ -22,9 +22,9 @@ setup(
     license='Apache-2.0',
     extras_require={'test': ['pytest'], 'plots': ['matplotlib']},
     entry_points={'console_scripts': [
-        'record = quad_msgs_bridge.recorder_node:main',
-        'review = quad_msgs_bridge.review:main',
-        'recover = quad_msgs_bridge.bag_recover:recover_main',
-        'rosbag2_qos = quad_msgs_bridge.bag_metadata:qos_overrides_main',
+        'record = quad_msgs_bridge.bag.recorder_node:main',
+        'review = quad_msgs_bridge.review.command:main',
+        'recover = quad_msgs_bridge.bag.recover:recover_main',
+        'rosbag2_qos = quad_msgs_bridge.bag.metadata:qos_overrides_main',
     ]},
 )

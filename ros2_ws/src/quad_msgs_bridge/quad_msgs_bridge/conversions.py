@@ -14,12 +14,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .contract import BASE_FRAME, ODOM_FRAME
-from .frames import euler_from_quaternion, quaternion_from_euler
-from .mixer import ROTOR_NAMES
-from .reference import ReferenceSample, SetpointPath, hold
-from .state import OdometrySample
-from .timebase import stamp_fields, stamp_seconds
+from quad_msgs_bridge.contract import BASE_FRAME, ODOM_FRAME
+from quad_msgs_bridge.frames import euler_from_quaternion, quaternion_from_euler
+from quad_msgs_bridge.mixer import ROTOR_NAMES
+from quad_msgs_bridge.reference import ReferenceSample, SetpointPath, hold
+from quad_msgs_bridge.state import OdometrySample
+from quad_msgs_bridge.timebase import stamp_fields, stamp_seconds
 
 SUBSYSTEM_NAMES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
 DIAGNOSTIC_QUANTITIES = ('surface', 'nn_equivalent', 'fuzzy_corrective')

@@ -17,11 +17,11 @@ import struct
 from itertools import chain
 from typing import Callable, Sequence
 
-from .contract import BASE_FRAME, ODOM_FRAME
-from .conversions import DIAGNOSTICS_DIMS, ROTOR_FORCES_DIMS, multi_array_dimensions
-from .frames import quaternion_from_euler
-from .state import OdometrySample
-from .timebase import stamp_seconds
+from quad_msgs_bridge.contract import BASE_FRAME, ODOM_FRAME
+from quad_msgs_bridge.conversions import DIAGNOSTICS_DIMS, ROTOR_FORCES_DIMS, multi_array_dimensions
+from quad_msgs_bridge.frames import quaternion_from_euler
+from quad_msgs_bridge.state import OdometrySample
+from quad_msgs_bridge.timebase import stamp_seconds
 
 #: CDR encapsulation header: plain CDR, little endian, no options
 ENCAPSULATION = b'\x00\x01\x00\x00'

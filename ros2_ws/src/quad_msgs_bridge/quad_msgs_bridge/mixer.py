@@ -7,7 +7,7 @@ All functions work on plain floats and elementwise on numpy arrays (one element 
 """
 from __future__ import annotations
 
-from .numeric import namespace_for
+from quad_msgs_bridge.numeric import namespace_for
 
 ROTOR_NAMES = ('F1_front', 'F2_right', 'F3_back', 'F4_left')
 CONTROL_NAMES = ('U1', 'U2', 'U3', 'U4')

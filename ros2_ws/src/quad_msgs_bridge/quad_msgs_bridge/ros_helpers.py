@@ -18,9 +18,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-from .contract import QosSpec, TopicSpec
-from .conversions import MessageKit, rclpy_kit
-from .vehicle_params import ParameterError
+from quad_msgs_bridge.contract import QosSpec, TopicSpec
+from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
+from quad_msgs_bridge.vehicle_params import ParameterError
 
 _RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE, 'best_effort': ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {'volatile': DurabilityPolicy.VOLATILE, 'transient_local': DurabilityPolicy.TRANSIENT_LOCAL}

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from typing import NamedTuple, Sequence
 
-from .frames import (Quat, Vec3, body_rates_from_euler_rates, euler_from_quaternion,
+from quad_msgs_bridge.frames import (Quat, Vec3, body_rates_from_euler_rates, euler_from_quaternion,
                      euler_rates_from_body_rates, quaternion_from_euler, body_to_world,
                      world_to_body)
 

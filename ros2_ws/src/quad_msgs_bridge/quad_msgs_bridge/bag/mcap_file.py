@@ -33,7 +33,7 @@ from mcap.records import (Channel, Chunk, ChunkIndex, DataEnd, Footer, Header, M
 from mcap.writer import LIBRARY_IDENTIFIER
 
 MAGIC = b'\x89MCAP0\r\n'
-LIBRARY = f'quad_msgs_bridge.mcap_file ({LIBRARY_IDENTIFIER} records)'
+LIBRARY = f'quad_msgs_bridge.bag.mcap_file ({LIBRARY_IDENTIFIER} records)'
 DEFAULT_CHUNK_SIZE = 1 << 20                     #: uncompressed bytes per chunk
 _MESSAGE = int(Opcode.MESSAGE)
 _MESSAGE_HEAD = struct.Struct('<BQHIQQ')          # opcode, record length, channel, sequence, log, publish

@@ -16,9 +16,9 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from .bag_reader import mcap_file
-from .contract import CONTROL_WRENCH, ODOM, ROTOR_FORCES, resolve
-from .timebase import NANOSECONDS_PER_SECOND
+from quad_msgs_bridge.bag.reader import mcap_file
+from quad_msgs_bridge.contract import CONTROL_WRENCH, ODOM, ROTOR_FORCES, resolve
+from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND
 
 
 def _stamp_ns(cdr: bytes) -> int:

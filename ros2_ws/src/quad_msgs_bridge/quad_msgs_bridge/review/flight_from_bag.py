@@ -1,4 +1,4 @@
-"""A flight rebuilt from a bag: the :class:`~quad_msgs_bridge.metrics.FlightRecord` the live run kept.
+"""A flight rebuilt from a bag: the :class:`~quad_msgs_bridge.review.metrics.FlightRecord` the live run kept.
 
 Any rosbag2 bag with the contract topics works (ours, ``ros2 bag record -s mcap``, a sqlite3 copy):
 it is read with ``rosbags``' AnyReader and decoded with the bridge's ``*_from_msg`` readers. One
@@ -16,14 +16,14 @@ from pathlib import Path
 
 from rosbags.highlevel import AnyReader
 
-from .bag_reader import BagReadError, is_finalized, mcap_file, read_custom_data
-from .bag_writer import jazzy_typestore
-from .contract import CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM, ROTOR_FORCES, TopicSpec, resolve
-from .conversions import (controls_from_wrench, diagnostics_from_msg, odometry_from_msg, pose_from_msg,
+from quad_msgs_bridge.bag.reader import BagReadError, is_finalized, mcap_file, read_custom_data
+from quad_msgs_bridge.bag.writer import jazzy_typestore
+from quad_msgs_bridge.contract import CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM, ROTOR_FORCES, TopicSpec, resolve
+from quad_msgs_bridge.conversions import (controls_from_wrench, diagnostics_from_msg, odometry_from_msg, pose_from_msg,
                           rotor_forces_from_msg)
-from .metrics import FlightRecord, FlightRecorder
-from .state import PSI, state_from_odometry
-from .vehicle_params import VehicleParams, load_vehicle_file
+from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
+from quad_msgs_bridge.state import PSI, state_from_odometry
+from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
 #: the topics a flight record needs
 NEEDED_TOPICS = (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS)

@@ -22,13 +22,13 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
-from .bag_writer import BagWriter
-from .contract import CLOCK, ODOM, RECORDED_TOPICS, TopicSpec, resolve
-from .conversions import MessageKit, rclpy_kit
-from .flight_bag import flight_custom_data
-from .ros_helpers import declare, init_ros, qos_profile
-from .timebase import NANOSECONDS_PER_SECOND
-from .vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.bag.writer import BagWriter
+from quad_msgs_bridge.contract import CLOCK, ODOM, RECORDED_TOPICS, TopicSpec, resolve
+from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
+from quad_msgs_bridge.bag.flight_bag import flight_custom_data
+from quad_msgs_bridge.ros_helpers import declare, init_ros, qos_profile
+from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 RECORD_DEPTH = 10000   #: reader history: the recorder never drops a message it was sent
 BATCH_PERIOD = 0.002   #: [s, wall] the recorder wakes at most this often and takes everything waiting

@@ -14,16 +14,16 @@ import json
 from pathlib import Path
 from typing import Sequence
 
-from .bag_writer import BagWriter
-from .contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, DEFAULT_NAMESPACE, ODOM,
+from quad_msgs_bridge.bag.writer import BagWriter
+from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, DEFAULT_NAMESPACE, ODOM,
                        RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, TopicSpec, resolve)
-from .conversions import path_msg, rosbags_kit, setpoints_msg
-from .fast_cdr import (clock_encoder, diagnostics_encoder, odometry_encoder, pose_stamped_encoder,
+from quad_msgs_bridge.conversions import path_msg, rosbags_kit, setpoints_msg
+from quad_msgs_bridge.fast_cdr import (clock_encoder, diagnostics_encoder, odometry_encoder, pose_stamped_encoder,
                        rotor_forces_encoder, wrench_encoder)
-from .reference import SetpointPath
-from .state import OdometrySample
-from .timebase import NANOSECONDS_PER_SECOND, nanoseconds
-from .vehicle_params import ParameterError, VehicleParams
+from quad_msgs_bridge.reference import SetpointPath
+from quad_msgs_bridge.state import OdometrySample
+from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND, nanoseconds
+from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
 
 
 def select_topics(names: Sequence[str] | None) -> tuple[TopicSpec, ...]:

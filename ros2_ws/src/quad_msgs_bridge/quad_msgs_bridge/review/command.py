@@ -1,13 +1,13 @@
 """``review BAG [--compare BAG2 ...]``: a recorded flight as numbers and pictures.
 
-Reads any bag with the contract topics (see :mod:`quad_msgs_bridge.flight_from_bag`), computes the
+Reads any bag with the contract topics (see :mod:`quad_msgs_bridge.review.flight_from_bag`), computes the
 metrics of ``summary.json`` with the same function as the live summary
-(:func:`quad_msgs_bridge.metrics.flight_metrics`), prints them, and writes into the output folder
+(:func:`quad_msgs_bridge.review.metrics.flight_metrics`), prints them, and writes into the output folder
 ``review.json``, the plots (``plots/*.png``, needs matplotlib) and a one-page report
 (``report.html`` and ``report.md``). With ``--compare`` the flights are overlaid in every plot and
 tabulated side by side.
 
-Run as ``ros2 run quad_msgs_bridge review BAG`` or, without ROS, ``python3 -m quad_msgs_bridge.review BAG``.
+Run as ``ros2 run quad_msgs_bridge review BAG`` or, without ROS, ``python3 -m quad_msgs_bridge.review.command BAG``.
 """
 from __future__ import annotations
 
@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
-from .flight_from_bag import BagFlight, read_flight
-from .metrics import flight_metrics
-from .plots import plot_flights
-from .report import text_table, write_html, write_markdown
+from quad_msgs_bridge.review.flight_from_bag import BagFlight, read_flight
+from quad_msgs_bridge.review.metrics import flight_metrics
+from quad_msgs_bridge.review.plots import plot_flights
+from quad_msgs_bridge.review.report import text_table, write_html, write_markdown
 
 PLOT_HINT = ('plots skipped: matplotlib is not installed (pip install matplotlib, '
              'or sudo apt install python3-matplotlib)')

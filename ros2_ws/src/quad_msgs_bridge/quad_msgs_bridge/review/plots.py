@@ -6,7 +6,7 @@
 * ``controls_zoom.png``: U1..U4 over one second after settling, where chattering shows;
 * ``surfaces.png``: the sliding surfaces S of the six subsystems;
 * ``fuzzy_share.png``: the fuzzy (corrective) share of each subsystem's control over time,
-  :func:`quad_msgs_bridge.metrics.fuzzy_share` on short windows.
+  :func:`quad_msgs_bridge.review.metrics.fuzzy_share` on short windows.
 
 Needs matplotlib (imported here only; the Agg backend, no display).
 """
@@ -17,10 +17,10 @@ from typing import Sequence
 
 import numpy as np
 
-from .conversions import SUBSYSTEM_NAMES
-from .flight_from_bag import BagFlight
-from .metrics import _wrap, fuzzy_share
-from .mixer import CONTROL_NAMES, CONTROL_UNITS, ROTOR_NAMES
+from quad_msgs_bridge.conversions import SUBSYSTEM_NAMES
+from quad_msgs_bridge.review.flight_from_bag import BagFlight
+from quad_msgs_bridge.review.metrics import _wrap, fuzzy_share
+from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS, ROTOR_NAMES
 
 SHARE_WINDOW = 0.5        #: [s] window of the fuzzy-share plot
 ZOOM_SPAN = 1.0           #: [s] span of the control zoom

@@ -19,8 +19,8 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, DataEnd, Header, McapRecord, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from .bag_metadata import CUSTOM_DATA_RECORD, METADATA_FILE, read_metadata
-from .mcap_file import MAGIC
+from quad_msgs_bridge.bag.metadata import CUSTOM_DATA_RECORD, METADATA_FILE, read_metadata
+from quad_msgs_bridge.bag.mcap_file import MAGIC
 
 _RECORD_HEAD = struct.Struct('<BQ')
 _FOOTER_SIZE = 9 + 20

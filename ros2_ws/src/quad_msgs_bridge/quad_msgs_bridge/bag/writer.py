@@ -24,10 +24,10 @@ from typing import Mapping, Sequence
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from .bag_metadata import (CUSTOM_DATA_RECORD, METADATA_FILE, ROS_DISTRO, TopicEntry, bagfile_information,
+from quad_msgs_bridge.bag.metadata import (CUSTOM_DATA_RECORD, METADATA_FILE, ROS_DISTRO, TopicEntry, bagfile_information,
                            channel_metadata, information_yaml, offered_qos_profiles, write_metadata)
-from .contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, TopicSpec, resolve
-from .mcap_file import DEFAULT_CHUNK_SIZE, BagWriteError, McapFileWriter
+from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, TopicSpec, resolve
+from quad_msgs_bridge.bag.mcap_file import DEFAULT_CHUNK_SIZE, BagWriteError, McapFileWriter
 
 _STOP = None
 

@@ -1,7 +1,7 @@
 """``recover BAG``: finalize a bag whose recording was killed (SIGKILL, power loss, full disk).
 
 The readable prefix of the MCAP file (every complete, CRC-valid chunk; see
-:class:`~quad_msgs_bridge.bag_reader.McapPrefix`) is rewritten into a finalized file with a summary,
+:class:`~quad_msgs_bridge.bag.reader.McapPrefix`) is rewritten into a finalized file with a summary,
 which then replaces the original; a bag directory gets a ``metadata.yaml`` with the true counts.
 Memory stays within two chunks (the one being read and the one being written).
 """
@@ -15,10 +15,10 @@ from pathlib import Path
 
 from mcap.records import Channel, Header, Message, Metadata, Schema
 
-from .bag_metadata import CUSTOM_DATA_RECORD, topic_from_channel
-from .bag_reader import BagReadError, McapPrefix, is_finalized, mcap_file
-from .bag_writer import finish_bag
-from .mcap_file import McapFileWriter
+from quad_msgs_bridge.bag.metadata import CUSTOM_DATA_RECORD, topic_from_channel
+from quad_msgs_bridge.bag.reader import BagReadError, McapPrefix, is_finalized, mcap_file
+from quad_msgs_bridge.bag.writer import finish_bag
+from quad_msgs_bridge.bag.mcap_file import McapFileWriter
 
 
 @dataclass

@@ -8,8 +8,8 @@ import html
 from pathlib import Path
 from typing import Sequence
 
-from .conversions import SUBSYSTEM_NAMES
-from .mixer import CONTROL_NAMES, CONTROL_UNITS
+from quad_msgs_bridge.conversions import SUBSYSTEM_NAMES
+from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 
 
 def metric_rows(metrics: Sequence[dict]) -> list[tuple[str, list[str]]]:

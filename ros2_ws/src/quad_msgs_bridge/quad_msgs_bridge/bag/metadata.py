@@ -15,7 +15,7 @@ from typing import Mapping, Sequence
 
 import yaml
 
-from .contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, QosSpec, TopicSpec, resolve
+from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, QosSpec, TopicSpec, resolve
 
 METADATA_FILE = 'metadata.yaml'
 BAG_VERSION = 9
