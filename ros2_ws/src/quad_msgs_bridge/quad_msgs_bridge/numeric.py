@@ -9,6 +9,8 @@ element per vehicle. Both namespaces offer the same primitives with the same mea
 * ``sign(v)``: -1, 0 or +1; ``signed_square(v)``: v |v|;
 * ``take(table, index)``: ``table[index]`` for a whole-number ``index`` (a float or float array);
 * ``all_finite(values)``: whether every value of a sequence (of floats or arrays) is finite;
+* ``finite_each(values)``: per vehicle, whether all its values in the sequence are finite;
+* ``any(condition)``: whether the condition holds for any vehicle (a plain bool);
 * ``project(values, limit)``: the list ``values`` with each value clipped to [-limit, limit].
 
 A single vehicle runs on plain floats because numpy's per-call overhead (a microsecond) is far
@@ -49,7 +51,8 @@ SCALAR = SimpleNamespace(
     sqrt=math.sqrt, exp=math.exp, abs=abs, floor=math.floor, minimum=min, maximum=max,
     clip=_clip, where=_where, sign=_sign, signed_square=lambda v: v * abs(v),
     take=lambda table, index: table[int(index)],
-    all_finite=lambda values: all(map(math.isfinite, values)), project=_project)
+    all_finite=lambda values: all(map(math.isfinite, values)), project=_project,
+    finite_each=lambda values: all(map(math.isfinite, values)), any=bool)
 BATCH = SimpleNamespace(
     sin=np.sin, cos=np.cos, atan=np.arctan, atan2=np.arctan2, tanh=np.tanh, hypot=np.hypot,
     sqrt=np.sqrt, exp=np.exp, abs=np.abs, floor=np.floor, minimum=np.minimum, maximum=np.maximum,
@@ -57,6 +60,8 @@ BATCH = SimpleNamespace(
     signed_square=lambda v: v * np.abs(v),
     take=lambda table, index: np.asarray(table)[np.asarray(index).astype(np.intp)],
     all_finite=_batch_all_finite,
+    finite_each=lambda values: np.logical_and.reduce([np.isfinite(v) for v in values]),
+    any=lambda condition: bool(np.any(condition)),
     project=lambda values, limit: [np.minimum(np.maximum(v, -limit), limit) for v in values])
 
 
