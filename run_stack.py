@@ -139,6 +139,9 @@ def main(argv: list[str] | None = None) -> int:
         return recover_main(argv[1:])
     if argv[:1] == ['rosbag2-qos']:
         return qos_overrides_main(argv[1:])
+    if argv[:1] == ['campaign']:
+        from flight_stack.campaign.cli import main as campaign_main
+        return campaign_main(argv[1:])
     args = parse_args(argv)
     try:
         params, disturbances = load_vehicle_file(args.vehicle)

@@ -120,8 +120,9 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
         recorder.append(done.time, truth[:3], truth[PSI], reference.position, reference.yaw,
                         out.forces, out.controls, surfaces, equivalent, corrective)
         if bag is not None:
+            truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
             bag.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
-                            surfaces, equivalent, corrective)
+                            surfaces, equivalent, corrective, truth=truth_odometry)
         if not loop.flying:
             break
         if progress and (k + 1) % report_every == 0:

@@ -12,11 +12,11 @@ from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 def build_summary(record: FlightRecord, *, backend: str, controller: str, scenario: str, seed: int,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
-                  physics_rate: float, wall_time_s: float, max_error: float) -> dict:
-    """Metrics of the flight plus everything needed to reproduce it."""
+                  physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None) -> dict:
+    """Metrics of the flight plus everything needed to reproduce it; ``failure``: why the flight ended early."""
     metrics = flight_metrics(record, settle_time, params.F_min, params.F_max)
     sim_time = metrics['duration_s']
-    failures = []
+    failures = [] if failure is None else [f'the flight ended early: {failure}']
     if not metrics['all_finite']:
         failures.append('non-finite state or rotor force')
     if metrics['max_position_error_m'] > max_error:

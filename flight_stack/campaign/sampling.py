@@ -30,6 +30,11 @@ TRANSLATIONAL_DRAG = ('Kfx', 'Kfy', 'Kfz', 'Kfphi', 'Kftheta', 'Kfpsi')
 VEHICLE_DRAW_ORDER = (('mass', 1), ('inertia', 3), ('drag', 6), ('thrust_coefficient', 4),
                       ('drag_coefficient', 4), ('cog_offset_m', 2), ('rotor_efficiency_loss', 4))
 VEHICLE_DRAWS = sum(count for _, count in VEHICLE_DRAW_ORDER)
+#: the sampled values of a flight as flights.csv names them (SI units)
+SAMPLED_COLUMNS = ('mass_kg', 'Ix_kgm2', 'Iy_kgm2', 'Iz_kgm2', *TRANSLATIONAL_DRAG,
+                   *(f'{name}{i}{unit}' for i in range(1, 5)
+                     for name, unit in (('Kp', '_Nss'), ('Kd', '_Nmss'), ('efficiency_loss', ''))),
+                   'cog_x_m', 'cog_y_m', 'wind_direction_rad')
 NOISE_FIELDS = {'position_m': 'position', 'velocity_mps': 'velocity', 'attitude_rad': 'attitude',
                 'body_rate_radps': 'body_rate'}
 
@@ -46,14 +51,14 @@ class FlightConditions:
         """Every value that differs between flights, named with its unit, for ``flights.csv``."""
         v = self.vehicle
         values = {'mass_kg': v.m, 'Ix_kgm2': v.Ix, 'Iy_kgm2': v.Iy, 'Iz_kgm2': v.Iz}
-        values.update({f'{name}': getattr(v, name) for name in TRANSLATIONAL_DRAG})
+        values.update({name: getattr(v, name) for name in TRANSLATIONAL_DRAG})
         for i in range(4):
             values[f'Kp{i + 1}_Nss'] = v.rotor_thrust_factors[i] * nominal.Kp
             values[f'Kd{i + 1}_Nmss'] = v.rotor_drag_factors[i] * nominal.Kd
             values[f'efficiency_loss{i + 1}'] = v.rotor_efficiency_loss[i]
         values['cog_x_m'], values['cog_y_m'] = v.cog_offset[0], v.cog_offset[1]
         values['wind_direction_rad'] = self.wind_direction
-        return values
+        return {name: values[name] for name in SAMPLED_COLUMNS}
 
 
 def sample_conditions(spec: CampaignSpec, nominal: VehicleParams, flight: int) -> FlightConditions:
@@ -107,13 +112,14 @@ def build_perturbations(spec: CampaignSpec, conditions: Sequence[FlightCondition
 
     vehicle = VehicleParams.stack([c.vehicle for c in conditions]) if batch else conditions[0].vehicle
     direction = np.array([c.wind_direction for c in conditions]) if batch else conditions[0].wind_direction
+    mean_speed = np.full(len(conditions), spec.wind_mean_speed_mps) if batch else spec.wind_mean_speed_mps
     noise = None
     if spec.sensor_noise:
         noise = SensorNoise(_noise_levels(spec, 'std'), _noise_levels(spec, 'bias_std'),
                             rngs('sensor_noise'), rngs('sensor_bias'))
     wind = None
     if spec.has_wind:
-        wind = Wind(physics_dt, spec.wind_mean_speed_mps, direction, spec.turbulence,
+        wind = Wind(physics_dt, mean_speed, direction, spec.turbulence,
                     rngs('turbulence') if spec.turbulence != 'none' else None)
     return Perturbations(
         true_vehicle=vehicle, sensor_noise=noise,

@@ -49,10 +49,12 @@ CONTROL_REFERENCE = TopicSpec('control/reference', 'geometry_msgs/msg/PoseStampe
                               'controller -> tools: the reference each update used')
 CONTROL_DIAGNOSTICS = TopicSpec('control/diagnostics', 'std_msgs/msg/Float64MultiArray', LOCKSTEP,
                                 'controller -> tools: S, NN and fuzzy terms per subsystem')
+GROUND_TRUTH = TopicSpec('ground_truth/odom', 'nav_msgs/msg/Odometry', LOCKSTEP,
+                         'simulator -> tools: the true state, recorded when odom carries sensor noise')
 CLOCK = TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', QosSpec('reliable', 'volatile', 10), 'quad_sim -> all')
 
 ALL_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, GOAL_POSE, CONTROL_WRENCH,
-              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK)
+              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, GROUND_TRUTH)
 #: what a flight bag records by default
 RECORDED_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, CONTROL_WRENCH, CONTROL_REFERENCE,
                    CONTROL_DIAGNOSTICS, CLOCK)

@@ -15,8 +15,9 @@ from pathlib import Path
 from typing import Sequence
 
 from quad_msgs_bridge.bag.writer import BagWriter
-from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, DEFAULT_NAMESPACE, ODOM,
-                       RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, TopicSpec, resolve)
+from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, DEFAULT_NAMESPACE,
+                                       GROUND_TRUTH, ODOM, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS,
+                                       TopicSpec, resolve)
 from quad_msgs_bridge.conversions import path_msg, rosbags_kit, setpoints_msg
 from quad_msgs_bridge.fast_cdr import (clock_encoder, diagnostics_encoder, odometry_encoder, pose_stamped_encoder,
                        rotor_forces_encoder, wrench_encoder)
@@ -58,6 +59,7 @@ class FlightBag:
         self._wrench, self._reference, self._diagnostics = name(CONTROL_WRENCH), name(CONTROL_REFERENCE), \
             name(CONTROL_DIAGNOSTICS)
         self._setpoints, self._path = name(SETPOINTS), name(REFERENCE_PATH)
+        self._truth = name(GROUND_TRUTH)
         self._encode_clock = clock_encoder()
         self._encode_odometry = odometry_encoder()
         self._encode_forces = rotor_forces_encoder()
@@ -85,9 +87,11 @@ class FlightBag:
 
     def record_step(self, odometry: OdometrySample, forces: Sequence[float], controls: Sequence[float],
                     reference_position: Sequence[float], reference_yaw: float, surfaces: Sequence[float],
-                    equivalent: Sequence[float], corrective: Sequence[float]) -> None:
+                    equivalent: Sequence[float], corrective: Sequence[float],
+                    truth: OdometrySample | None = None) -> None:
         """One control step: the odometry answered, the thrusts [N] and U1..U4 sent, the reference
-        [m, rad] used and the per-subsystem sliding surfaces, NN and fuzzy terms."""
+        [m, rad] used and the per-subsystem sliding surfaces, NN and fuzzy terms; with ``truth``
+        (the true state when the odometry carries sensor noise) also ``ground_truth/odom``."""
         stamp = nanoseconds(odometry.stamp)
         sec, nanosec = divmod(stamp, NANOSECONDS_PER_SECOND)
         write = self.writer.write_serialized
@@ -95,6 +99,8 @@ class FlightBag:
             write(self._clock, self._encode_clock(sec, nanosec), stamp)
         if self._odom:
             write(self._odom, self._encode_odometry(sec, nanosec, odometry), stamp)
+        if self._truth and truth is not None:
+            write(self._truth, self._encode_odometry(sec, nanosec, truth), stamp)
         if self._forces:
             write(self._forces, self._encode_forces(forces), stamp)
         if self._wrench:

@@ -18,7 +18,8 @@ from rosbags.highlevel import AnyReader
 
 from quad_msgs_bridge.bag.reader import BagReadError, is_finalized, mcap_file, read_custom_data
 from quad_msgs_bridge.bag.writer import jazzy_typestore
-from quad_msgs_bridge.contract import CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM, ROTOR_FORCES, TopicSpec, resolve
+from quad_msgs_bridge.contract import (ALL_TOPICS, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GROUND_TRUTH,
+                                       ODOM, ROTOR_FORCES, TopicSpec, resolve)
 from quad_msgs_bridge.conversions import (controls_from_wrench, diagnostics_from_msg, odometry_from_msg, pose_from_msg,
                           rotor_forces_from_msg)
 from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
@@ -27,6 +28,8 @@ from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
 #: the topics a flight record needs
 NEEDED_TOPICS = (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS)
+#: read when present: the true state of a flight whose odometry carries sensor noise
+OPTIONAL_TOPICS = (GROUND_TRUTH,)
 DEFAULT_SETTLE_TIME = 5.0
 
 
@@ -54,7 +57,9 @@ def _find_connection(connections, spec: TopicSpec, namespace: str | None):
         matches = [c for c in typed if c.topic == resolve(spec, namespace)]
     else:
         suffix = spec.name if spec.name.startswith('/') else '/' + spec.name
-        matches = [c for c in typed if c.topic.endswith(suffix)]
+        longer = [other.name for other in ALL_TOPICS if other.name != spec.name and other.name.endswith(suffix)]
+        matches = [c for c in typed if c.topic.endswith(suffix)
+                   and not any(c.topic.endswith('/' + name) for name in longer)]
     if len({c.topic for c in matches}) > 1:
         raise BagReadError(f'several {spec.type} topics end in {spec.name!r}: '
                            f'{sorted({c.topic for c in matches})}; choose one with --namespace')
@@ -82,6 +87,7 @@ class _Topics:
     forces: list = field(default_factory=list)        #: each rotor_forces
     diagnostics: list = field(default_factory=list)   #: each control/diagnostics
     odometry: dict = field(default_factory=dict)      #: stamp [ns] -> OdometrySample
+    truth: dict = field(default_factory=dict)         #: stamp [ns] -> OdometrySample of ground_truth/odom
     references: dict = field(default_factory=dict)    #: stamp [ns] -> (position, yaw)
 
 
@@ -93,12 +99,15 @@ def _read_topics(bag: Path, namespace: str | None, arm_length: float) -> _Topics
         if missing:
             raise BagReadError(f'{bag}: no {", ".join(missing)} topic (has: '
                                f'{", ".join(sorted({c.topic for c in reader.connections}))})')
+        found.update({spec: _find_connection(reader.connections, spec, namespace) for spec in OPTIONAL_TOPICS})
         role = {c.id: spec for spec, connections in found.items() for c in connections}
         for connection, _, raw in reader.messages(connections=[c for cs in found.values() for c in cs]):
             msg = reader.deserialize(raw, connection.msgtype)
             spec = role[connection.id]
             if spec is ODOM:
                 topics.odometry[_stamp_ns(msg)] = odometry_from_msg(msg)
+            elif spec is GROUND_TRUTH:
+                topics.truth[_stamp_ns(msg)] = odometry_from_msg(msg)
             elif spec is CONTROL_WRENCH:
                 topics.stamps.append(_stamp_ns(msg))
                 topics.controls.append(controls_from_wrench(msg, arm_length))
@@ -112,7 +121,11 @@ def _read_topics(bag: Path, namespace: str | None, arm_length: float) -> _Topics
 
 
 def _flight_record(topics: _Topics, warnings: list) -> FlightRecord | None:
-    """One row per control step (see the module doc); None if there is no complete step."""
+    """One row per control step (see the module doc); None if there is no complete step.
+
+    The position and yaw are the true ones: ``ground_truth/odom`` where the bag has it (the
+    odometry then carries sensor noise), else ``odom``.
+    """
     steps = min(len(topics.stamps), len(topics.forces), len(topics.diagnostics))
     if steps < max(len(topics.stamps), len(topics.forces), len(topics.diagnostics)):
         warnings.append(f'unequal counts: {len(topics.stamps)} wrenches, {len(topics.forces)} rotor_forces, '
@@ -121,7 +134,7 @@ def _flight_record(topics: _Topics, warnings: list) -> FlightRecord | None:
     skipped = 0
     for stamp, controls, forces, (surfaces, equivalent, corrective) in zip(
             topics.stamps, topics.controls, topics.forces, topics.diagnostics):
-        sample, reference = topics.odometry.get(stamp), topics.references.get(stamp)
+        sample, reference = (topics.truth or topics.odometry).get(stamp), topics.references.get(stamp)
         if sample is None or reference is None:
             skipped += 1
             continue
