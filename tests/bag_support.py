@@ -28,9 +28,9 @@ class CapturingFlightBag(FlightBag):
         self.paths.append(path)
         super().record_setpoints(path)
 
-    def record_step(self, *values) -> None:
+    def record_step(self, *values, **named) -> None:
         self.steps.append(values)
-        super().record_step(*values)
+        super().record_step(*values, **named)
 
 
 @dataclass
