@@ -140,7 +140,7 @@ def test_dryden_spectra_match_the_standard(long_sample):
 def test_mean_wind_direction_and_turbulence_axes():
     """Towards +y (direction pi/2): the mean is (0, U, 0), u gusts move along y and v gusts along -x."""
     wind = Wind(0.01, mean_speed=5.0, direction=math.pi / 2, turbulence='light', rng=flight_streams(3, 0).turbulence)
-    gusts = DrydenTurbulence('light', 0.01, flight_streams(3, 0).turbulence, 5.0, 5.0)
+    gusts = DrydenTurbulence('light', 0.01, flight_streams(3, 0).turbulence, airspeed=5.0, altitude=5.0)
     for _ in range(50):
         u, v, w = gusts.step()
         air = wind.step()
