@@ -20,6 +20,16 @@ def test_applied_forces_are_those_computed_k_steps_earlier(k):
         assert applied == (computed_at(n - k) if n >= k else (0.0, 0.0, 0.0, 0.0))
 
 
+def test_batch_delay_equals_single_vehicle_delays():
+    batch, singles = TransportDelay(3), [TransportDelay(3) for _ in range(5)]
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        forces = rng.uniform(0.0, 2.5, (4, 5))              # (rotor, vehicle)
+        applied = batch(tuple(forces))
+        for i, single in enumerate(singles):
+            assert [a[i] for a in applied] == list(single(tuple(float(f) for f in forces[:, i])))
+
+
 def test_batch_delay_copies_what_it_queues():
     delay = TransportDelay(2)
     forces = [np.array([1.0, 2.0]), np.array([3.0, 4.0]), np.array([5.0, 6.0]), np.array([7.0, 8.0])]
