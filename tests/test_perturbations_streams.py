@@ -12,7 +12,8 @@ def test_streams_are_the_spawned_children_of_the_flights_seed_sequence():
     children = np.random.SeedSequence(entropy=42, spawn_key=(17,)).spawn(len(FlightStreams._fields))
     streams = flight_streams(42, 17)
     for child, generator in zip(children, streams):
-        assert generator.standard_normal(5).tolist() == np.random.Generator(np.random.PCG64(child)).standard_normal(5).tolist()
+        reference = np.random.Generator(np.random.PCG64(child))
+        assert generator.standard_normal(5).tolist() == reference.standard_normal(5).tolist()
     assert streams._fields == ('vehicle', 'wind', 'turbulence', 'sensor_noise', 'sensor_bias')
 
 

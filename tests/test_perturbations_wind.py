@@ -139,7 +139,8 @@ def test_dryden_spectra_match_the_standard(long_sample):
 
 def test_mean_wind_direction_and_turbulence_axes():
     """Towards +y (direction pi/2): the mean is (0, U, 0), u gusts move along y and v gusts along -x."""
-    wind = Wind(0.01, mean_speed=5.0, direction=math.pi / 2, turbulence='light', rng=flight_streams(3, 0).turbulence)
+    wind = Wind(0.01, mean_speed=5.0, direction=math.pi / 2, turbulence='light',
+                rng=flight_streams(3, 0).turbulence)
     gusts = DrydenTurbulence('light', 0.01, flight_streams(3, 0).turbulence, airspeed=5.0, altitude=5.0)
     for _ in range(50):
         u, v, w = gusts.step()
@@ -150,7 +151,8 @@ def test_mean_wind_direction_and_turbulence_axes():
 
 
 def test_airspeed_is_the_mean_wind_with_a_floor():
-    assert Wind(0.01, mean_speed=0.2, turbulence='light', rng=flight_streams(0, 0).turbulence).turbulence.airspeed == 1.0
+    calm = Wind(0.01, mean_speed=0.2, turbulence='light', rng=flight_streams(0, 0).turbulence)
+    assert calm.turbulence.airspeed == 1.0
     assert Wind(0.01, mean_speed=6.0, turbulence='light', rng=flight_streams(0, 0).turbulence,
                 min_advection_speed=2.0).turbulence.airspeed == 6.0
 
