@@ -1,4 +1,4 @@
-"""The model flies the true vehicle: mass, rotor factors, efficiency loss, CoG offset, wind drag; one vehicle and batches."""
+"""The model flies the true vehicle: mass, rotor factors, efficiency loss, CoG offset, wind drag; batches."""
 import dataclasses
 import math
 

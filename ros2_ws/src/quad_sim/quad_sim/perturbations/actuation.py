@@ -41,7 +41,8 @@ class TransportDelay:
             below = int(delay / control_dt)
             raise ParameterError(
                 f'delay_s: {delay} s is not a whole number of control steps of {control_dt} s '
-                f'(nearest: {below} steps = {below * control_dt:g} s or {below + 1} steps = {(below + 1) * control_dt:g} s)')
+                f'(nearest: {below} steps = {below * control_dt:g} s or '
+                f'{below + 1} steps = {(below + 1) * control_dt:g} s)')
         return cls(steps)
 
     def __call__(self, forces: Sequence) -> tuple:

@@ -66,10 +66,11 @@ class SensorNoise:
     """
 
     def __init__(self, noise: SensorErrors, bias: SensorErrors, noise_rng, bias_rng):
-        noise_rng, bias_rng = check_rng('sensor_noise.noise_rng', noise_rng), check_rng('sensor_noise.bias_rng', bias_rng)
-        check_batch(noise_rng=noise_rng, bias_rng=bias_rng,
-                    **{f'{kind}.{f.name}': getattr(errors, f.name) for kind, errors in (('noise', noise), ('bias', bias))
-                       for f in fields(errors)})
+        noise_rng = check_rng('sensor_noise.noise_rng', noise_rng)
+        bias_rng = check_rng('sensor_noise.bias_rng', bias_rng)
+        stds = {f'{kind}.{f.name}': getattr(errors, f.name)
+                for kind, errors in (('noise', noise), ('bias', bias)) for f in fields(errors)}
+        check_batch(noise_rng=noise_rng, bias_rng=bias_rng, **stds)
         self._std = noise.per_component()
         bias_draws = StandardNormals(bias_rng, 12).next()
         self.bias = tuple(std * z for std, z in zip(bias.per_component(), bias_draws))

@@ -8,7 +8,7 @@ Mean wind: speed U [m/s] and ``direction`` [rad], the direction the air moves *t
 in the world x-y plane from +x (east) towards +y (north); a meteorological "wind from" bearing is
 a different convention. No vertical mean wind.
 
-Turbulence: the Dryden model of MIL-F-8785C, section 3.7.2 (also in MIL-HDBK-1797), low-altitude
+Turbulence: the Dryden model of MIL-F-8785C (also in MIL-HDBK-1797), low-altitude
 form (below 1000 ft). The standard, with the altitude h and the scales L in feet:
 
 - intensities from the wind speed at 20 ft, W20 = 15 / 30 / 45 knots (light / moderate / severe):
@@ -144,11 +144,11 @@ class DrydenTurbulence:
     """Dryden gust velocities (u along the mean wind, v to its left, w up) [m/s], one value per step.
 
     ``rng``: a Generator (one vehicle: floats) or a list of B Generators (a batch: arrays of shape
-    (B,)); ``altitude`` [m] and ``airspeed`` [m/s] may be floats or per-vehicle arrays. Five
-    standard normals per step (u: 1, v: 2, w: 2).
+    (B,)); ``airspeed`` V [m/s] (advects the turbulence) and ``altitude`` [m] may be floats or
+    per-vehicle arrays. Five standard normals per step (u: 1, v: 2, w: 2).
     """
 
-    def __init__(self, intensity: str, dt: float, rng, altitude=DEFAULT_ALTITUDE, airspeed=1.0):
+    def __init__(self, intensity: str, dt: float, rng, airspeed, altitude=DEFAULT_ALTITUDE):
         dt = check_number('dt', dt, 0.0, low_inclusive=False)
         altitude = check_values('altitude', altitude, 0.0, low_inclusive=False)
         airspeed = check_values('airspeed', airspeed, 0.0, low_inclusive=False)
@@ -215,7 +215,7 @@ class Wind:
                                      f'turbulence stream)')
             check_batch(mean_speed=mean_speed, direction=direction, rng=check_rng('wind.rng', rng))
             airspeed = xp.where(mean_speed > min_advection_speed, mean_speed, min_advection_speed)
-            self.turbulence = DrydenTurbulence(turbulence, dt, rng, altitude, airspeed)
+            self.turbulence = DrydenTurbulence(turbulence, dt, rng, airspeed, altitude)
 
     def step(self) -> tuple:
         """Air velocity (w_x, w_y, w_z) [m/s, world ENU] to hold over the coming physics step."""
