@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
 from quad_msgs_bridge.bag.flight_bag import FlightBag
@@ -43,10 +43,12 @@ def setpoint_path(path: SetpointPath) -> SetpointPath:
 def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, disturbances: Disturbances,
                  gains: dict, duration: float, physics_rate: float, setpoint_rate: float = 50.0,
                  progress: bool = False, bag: FlightBag | None = None,
-                 stop: Callable[[], bool] | None = None) -> FlightResult:
+                 stop: Callable[[], bool] | None = None, sinks: Sequence = ()) -> FlightResult:
     """Fly ``trajectory`` for ``duration`` [s] of sim time; one record row per control step.
 
     With ``bag`` every step's contract messages are recorded too (the caller closes the bag).
+    ``sinks`` get the same calls after the bag, in order: ``record_setpoints(path)`` once, then
+    ``record_step(...)`` per step (e.g. a ``pacing.Pacer``, then a ``live_view.LiveView``).
     ``stop`` is asked between two control steps: once it returns true the flight raises
     KeyboardInterrupt, with every step so far complete in the bag.
     """
@@ -63,8 +65,9 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     started = time.perf_counter()
-    if bag is not None:
-        bag.record_setpoints(published)
+    step_sinks = ([bag] if bag is not None else []) + list(sinks)
+    for sink in step_sinks:
+        sink.record_setpoints(published)
     for k in range(steps):
         if stop is not None and stop():
             raise KeyboardInterrupt(f'stopped after {k} control steps')
@@ -79,9 +82,9 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
                                             [a.corrective for a in axes])
         recorder.append(t, odometry.position, state[PSI], reference.position, reference.yaw,
                         out.forces, out.controls, surfaces, equivalent, corrective)
-        if bag is not None:
-            bag.record_step(odometry, out.forces, out.controls, reference.position, reference.yaw,
-                            surfaces, equivalent, corrective)
+        for sink in step_sinks:
+            sink.record_step(odometry, out.forces, out.controls, reference.position, reference.yaw,
+                             surfaces, equivalent, corrective)
         simulator.advance(substeps)
         if progress and (k + 1) % report_every == 0:
             print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
