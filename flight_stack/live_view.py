@@ -293,8 +293,9 @@ class LiveView:
     """One vehicle's flight served live: a step sink with the per-flight calls of ``FlightBag``.
 
     ``record_setpoints(path)`` once, ``record_step(...)`` per control step, ``close()``. The contract
-    messages go out at every step; the scene and the sim time at most every ``SCENE_PERIOD`` of wall
-    time, and once more at ``close()`` (so the whole flown path stays on screen).
+    messages of every step go out while a client is subscribed (none are made otherwise); the scene
+    and the sim time at most every ``SCENE_PERIOD`` of wall time, and once more at ``close()`` (so the
+    whole flown path stays on screen).
     """
 
     def __init__(self, server: LiveServer, params: VehicleParams, namespace: str = DEFAULT_NAMESPACE,
@@ -317,8 +318,9 @@ class LiveView:
                     equivalent: Sequence[float], corrective: Sequence[float]) -> None:
         """The arguments of :meth:`FlightBag.record_step` (same units)."""
         self.server.send_latched()
-        self._contract.record_step(odometry, forces, controls, reference_position, reference_yaw,
-                                   surfaces, equivalent, corrective)
+        if self.server.subscribed():       # nobody listening: no message to make
+            self._contract.record_step(odometry, forces, controls, reference_position, reference_yaw,
+                                       surfaces, equivalent, corrective)
         self._scene.add_path_point(odometry.stamp, odometry.position)
         self._last = (nanoseconds(odometry.stamp), odometry, forces, reference_position)
         now = time.perf_counter()

@@ -4,6 +4,7 @@ topic it subscribed to late, and leaves mid-flight without stopping it; the bag 
 the bag of the same flight without --live; the live options fail cleanly."""
 import json
 import math
+import signal
 import socket
 import struct
 import subprocess
@@ -13,13 +14,14 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 from rosbags.typesys import Stores, get_typestore
+from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 import run_stack
 from flight_stack.live_view import VehicleScene, is_loopback, PATH_MAX_POINTS
 from flight_stack.pacing import MAX_LAG, Pacer
 from quad_msgs_bridge.bag.metadata import read_metadata
-from quad_msgs_bridge.bag.reader import mcap_file
+from quad_msgs_bridge.bag.reader import is_finalized, mcap_file
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
@@ -73,20 +75,25 @@ def watch_live_flight(url: str) -> dict:
     return seen
 
 
+def start_live_flight(out: Path, *options: str) -> tuple[subprocess.Popen, str]:
+    """run_stack.py flying FLIGHT live on a free port; (process, the URL it serves on)."""
+    process = subprocess.Popen([sys.executable, str(ROOT / 'run_stack.py'), *FLIGHT, '--out', str(out), '--live',
+                                '--live-port', '0', *options],
+                               cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = process.stdout.readline()
+    while line and not line.startswith('live view: ws://'):
+        line = process.stdout.readline()
+    assert line, process.communicate(timeout=TIMEOUT)
+    return process, line.split()[2]
+
+
 @pytest.fixture(scope='module')
 def live_flight(tmp_path_factory):
     """A live flight (paced at 2x real time, waiting for its client) watched by a client that leaves
     early, and the same flight without --live."""
     out = tmp_path_factory.mktemp('live')
-    process = subprocess.Popen([sys.executable, str(ROOT / 'run_stack.py'), *FLIGHT, '--out', str(out), '--live',
-                                '--live-port', '0', '--live-wait', '--speed-factor', '2'],
-                               cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    process, url = start_live_flight(out, '--live-wait', '--speed-factor', '2')
     try:
-        line = process.stdout.readline()
-        while line and not line.startswith('live view: ws://'):
-            line = process.stdout.readline()
-        assert line, process.communicate(timeout=TIMEOUT)
-        url = line.split()[2]
         seen = watch_live_flight(url)
         stdout, stderr = process.communicate(timeout=120)
     finally:
@@ -157,6 +164,37 @@ def test_the_bag_of_a_live_flight_equals_the_bag_without_live(live_flight):
     counts = [{t['topic_metadata']['name']: t['message_count'] for t in read_metadata(bag)['topics_with_message_count']}
               for bag in (live_flight['bag'], live_flight['plain_bag'])]
     assert counts[0] == counts[1] and counts[0]['/quad/odom'] == STEPS
+
+
+def test_ctrl_c_closes_the_server_and_the_bag(tmp_path):
+    process, url = start_live_flight(tmp_path, '--speed-factor', '1')      # 3 s of wall time
+    try:
+        with connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=TIMEOUT) as client:
+            channels = {}
+            while '/quad/odom' not in channels:
+                message = json.loads(client.recv(timeout=TIMEOUT))
+                if message['op'] == 'advertise':
+                    channels.update({channel['topic']: channel['id'] for channel in message['channels']})
+            client.send(json.dumps({'op': 'subscribe', 'subscriptions': [{'id': 1, 'channelId': channels['/quad/odom']}]}))
+            frame = client.recv(timeout=TIMEOUT)
+            while isinstance(frame, str) or frame[0] != 0x01:
+                frame = client.recv(timeout=TIMEOUT)                       # flying: odometry comes
+            process.send_signal(signal.SIGINT)
+            with pytest.raises(ConnectionClosed):                          # the server went away
+                while True:
+                    client.recv(timeout=TIMEOUT)
+        _, stderr = process.communicate(timeout=TIMEOUT)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == 130 and 'interrupted; bag closed' in stderr
+    bag = tmp_path / 'bag'
+    assert is_finalized(mcap_file(bag))
+    recorded = messages(bag)
+    counts = {t['topic_metadata']['name']: t['message_count'] for t in read_metadata(bag)['topics_with_message_count']}
+    assert counts == {topic: sum(m[0] == topic for m in recorded) for topic in CONTRACT}
+    per_step = [n for topic, n in counts.items() if not topic.endswith(('setpoints', 'reference_path'))]
+    assert 0 < min(per_step) == max(per_step) < STEPS                     # stopped between two steps, mid-flight
 
 
 def test_a_port_in_use_is_a_clean_error_before_flying(tmp_path, capsys):
