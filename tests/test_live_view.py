@@ -89,10 +89,10 @@ def start_live_flight(out: Path, *options: str) -> tuple[subprocess.Popen, str]:
 
 @pytest.fixture(scope='module')
 def live_flight(tmp_path_factory):
-    """A live flight (paced at 2x real time, waiting for its client) watched by a client that leaves
+    """A live flight (paced at real time, waiting for its client) watched by a client that leaves
     early, and the same flight without --live."""
     out = tmp_path_factory.mktemp('live')
-    process, url = start_live_flight(out, '--live-wait', '--speed-factor', '2')
+    process, url = start_live_flight(out, '--live-wait', '--speed-factor', '1')
     try:
         seen = watch_live_flight(url)
         stdout, stderr = process.communicate(timeout=120)
@@ -167,7 +167,7 @@ def test_the_bag_of_a_live_flight_equals_the_bag_without_live(live_flight):
 
 
 def test_ctrl_c_closes_the_server_and_the_bag(tmp_path):
-    process, url = start_live_flight(tmp_path, '--speed-factor', '1')      # 3 s of wall time
+    process, url = start_live_flight(tmp_path, '--live-wait', '--speed-factor', '1')   # 3 s of wall time
     try:
         with connect(url, subprotocols=['foxglove.sdk.v1'], open_timeout=TIMEOUT) as client:
             channels = {}
@@ -175,7 +175,8 @@ def test_ctrl_c_closes_the_server_and_the_bag(tmp_path):
                 message = json.loads(client.recv(timeout=TIMEOUT))
                 if message['op'] == 'advertise':
                     channels.update({channel['topic']: channel['id'] for channel in message['channels']})
-            client.send(json.dumps({'op': 'subscribe', 'subscriptions': [{'id': 1, 'channelId': channels['/quad/odom']}]}))
+            client.send(json.dumps({'op': 'subscribe',
+                                    'subscriptions': [{'id': 1, 'channelId': channels['/quad/odom']}]}))
             frame = client.recv(timeout=TIMEOUT)
             while isinstance(frame, str) or frame[0] != 0x01:
                 frame = client.recv(timeout=TIMEOUT)                       # flying: odometry comes
