@@ -126,22 +126,25 @@ def test_the_client_sees_the_contract_topics_with_the_bags_schemas(live_flight):
 
 def test_the_client_decodes_the_odometry_with_the_jazzy_typestore(live_flight):
     typestore = get_typestore(Stores.ROS2_JAZZY)
-    log_time, payload = live_flight['seen']['odometry'][0]
-    odometry = typestore.deserialize_cdr(payload, 'nav_msgs/msg/Odometry')
-    assert (odometry.header.frame_id, odometry.child_frame_id) == ('odom', 'base_link')
-    stamp = odometry.header.stamp
-    assert stamp.sec * 1_000_000_000 + stamp.nanosec == log_time           # log time = sim time, as in the bag
-    position, q = odometry.pose.pose.position, odometry.pose.pose.orientation
-    assert all(math.isfinite(v) for v in (position.x, position.y, position.z))
-    assert math.isclose(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2, 1.0, abs_tol=1e-9)
+    stamps = []
+    for log_time, payload in live_flight['seen']['odometry']:
+        odometry = typestore.deserialize_cdr(payload, 'nav_msgs/msg/Odometry')
+        assert (odometry.header.frame_id, odometry.child_frame_id) == ('odom', 'base_link')
+        stamp = odometry.header.stamp
+        assert stamp.sec * 1_000_000_000 + stamp.nanosec == log_time       # log time = sim time, as in the bag
+        position, q = odometry.pose.pose.position, odometry.pose.pose.orientation
+        assert all(math.isfinite(v) for v in (position.x, position.y, position.z))
+        assert math.isclose(q.x ** 2 + q.y ** 2 + q.z ** 2 + q.w ** 2, 1.0, abs_tol=1e-9)
+        stamps.append(log_time)
+    assert stamps == sorted(set(stamps)) and stamps[0] == 0                # in order, from the first step
     assert live_flight['seen']['scene'][0][1]                             # a non-empty SceneUpdate
     path = typestore.deserialize_cdr(live_flight['seen']['reference_path'][0][1], 'nav_msgs/msg/Path')
-    assert path.header.frame_id == 'odom' and len(path.poses) > 100      # 3 s at 50 Hz
-    print(f'\nodometry at t = {log_time / 1e9:.2f} s: frame {odometry.header.frame_id} -> {odometry.child_frame_id}, '
-          f'position ({position.x:.4f}, {position.y:.4f}, {position.z:.4f}) m, '
-          f'orientation ({q.x:.4f}, {q.y:.4f}, {q.z:.4f}, {q.w:.4f}); '
-          f'{len(live_flight["seen"]["odometry"])} odometry and {len(live_flight["seen"]["scene"])} scene messages '
-          f'taken, reference_path (subscribed late) with {len(path.poses)} poses')
+    assert path.header.frame_id == 'odom' and len(path.poses) == 151      # 3 s at 50 Hz, both ends
+    print(f'\nlast odometry taken, t = {log_time / 1e9:.3f} s: {odometry.header.frame_id} -> '
+          f'{odometry.child_frame_id}, position ({position.x:.4f}, {position.y:.4f}, {position.z:.4f}) m, '
+          f'orientation ({q.x:.5f}, {q.y:.5f}, {q.z:.5f}, {q.w:.5f}); {len(stamps)} odometry messages decoded, '
+          f'{len(live_flight["seen"]["scene"])} scene updates; reference_path (subscribed late) with '
+          f'{len(path.poses)} poses')
 
 
 def test_a_client_that_leaves_mid_flight_does_not_stop_it(live_flight):
