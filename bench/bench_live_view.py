@@ -9,7 +9,9 @@ The same recorded embedded flight (bag on in every case), alternated ``--repeats
    app would be, reading everything it is sent).
 
 The flight's wall time (the control loop, with its bag writes and live-view calls) is printed per
-run, then the medians and the fastest runs side by side, as ratios to case 1. No ROS needed.
+run, then the medians and the fastest runs side by side, as ratios to case 1. Then the flight
+thread's own cost per control step: ``LiveView.record_step`` without a client, and the contract
+messages it makes (encoding and handing them to the server) when a client is subscribed. No ROS needed.
 
 Usage: python3 bench/bench_live_view.py [--duration 10] [--repeats 3]
 """
@@ -22,6 +24,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import timeit
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -33,6 +36,7 @@ from flight_stack.live_view import SUBPROTOCOL, LiveServer, LiveView  # noqa: E4
 from nnit2fsmc_controller.factory import load_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
 from quad_msgs_bridge.bag.flight_bag import FlightBag  # noqa: E402
+from quad_msgs_bridge.state import OdometrySample  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
 
 
@@ -94,6 +98,19 @@ def flight_times(duration: float, repeats: int) -> dict[str, list[float]]:
     return times
 
 
+def per_step_costs(number: int = 20000) -> tuple[float, float]:
+    """[us] of LiveView.record_step without a client, and of the contract messages of one step."""
+    params, _ = load_vehicle_file(None)
+    sample = OdometrySample(12.345, (1.0, -2.0, 3.0), (0.1, 0.2, 0.3, 0.927), (0.4, 0.5, 0.6), (0.7, 0.8, 0.9))
+    step = (sample, (1.1, 1.2, 1.3, 1.4), (5.0, 0.1, -0.2, 0.01), (1.0, 2.0, 3.0), 0.1, [0.1] * 6, [0.2] * 6,
+            [0.3] * 6)
+    with LiveServer('127.0.0.1', 0) as server:
+        view = LiveView(server, params)
+        alone = timeit.timeit(lambda: view.record_step(*step), number=number)
+        messages = timeit.timeit(lambda: view._contract.record_step(*step), number=number)
+    return 1e6 * alone / number, 1e6 * messages / number
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--duration', type=float, default=10.0, help='sim time per flight [s] (1000 steps/s)')
@@ -111,6 +128,10 @@ def main() -> int:
     for name, values in times.items():
         median, fastest = statistics.median(values), min(values)
         print(f'{name:36s} {median:10.3f} {median / base_median:7.3f} {fastest:11.3f} {fastest / base_min:7.3f}')
+    steps = round(args.duration * 1000)
+    alone, messages = per_step_costs()
+    print(f'per control step: the flight without live view {1e6 * base_median / steps:.0f} us (median); '
+          f'LiveView.record_step without a client {alone:.1f} us; the contract messages for a client {messages:.1f} us')
     return 0
 
 
