@@ -63,7 +63,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--namespace', default=DEFAULT_NAMESPACE, help='ROS backend: namespace of the vehicle')
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                         help='ROS backend: lockstep (deterministic) or realtime simulation')
-    parser.add_argument('--speed-factor', type=float, default=1.0, help='ROS backend, realtime: sim s per wall s')
+    parser.add_argument('--speed-factor', type=float, default=None,
+                        help='sim s per wall s (default 1: real time) of the ROS backend\'s realtime mode and of '
+                             'the --live view; with --live 0 flies as fast as it can')
     parser.add_argument('--extra-subscribers', type=int, default=0, metavar='N',
                         help='ROS backend: the simulator also waits for N more odom subscribers before it starts '
                              '(your own `ros2 bag record`, RViz), so they miss nothing of a lockstep flight')
@@ -74,6 +76,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--topics', nargs='+', default=None, metavar='TOPIC',
                         help='contract topics to record (default: all of '
                              + ' '.join(t.name for t in RECORDED_TOPICS) + ')')
+    live = parser.add_argument_group('live view (embedded backend; see the README, "Live view")')
+    live.add_argument('--live', action='store_true',
+                      help='serve the flight to Foxglove as it flies (Foxglove WebSocket protocol), paced at '
+                           '--speed-factor')
+    live.add_argument('--live-host', default='127.0.0.1',
+                      help='address the live view listens on (default %(default)s: this machine only)')
+    live.add_argument('--live-port', type=int, default=8765,
+                      help='port of the live view (default %(default)s; 0: any free port)')
+    live.add_argument('--live-wait', action='store_true',
+                      help='start flying once a client has subscribed to a topic (so that it misses nothing)')
     return parser.parse_args(argv)
 
 
@@ -95,15 +107,63 @@ def stop_signals():
             signal.signal(number, handler)
 
 
-def choose_backend(requested: str) -> str:
+def choose_backend(requested: str, live: bool) -> str:
     if requested != 'auto':
         return requested
+    if live:
+        return 'embedded'
     try:
         import rclpy  # noqa: F401
     except ImportError:
         print('backend: embedded (rclpy cannot be imported: source /opt/ros/jazzy/setup.bash for the ROS backend)')
         return 'embedded'
     return 'ros'
+
+
+def check_live_options(args, backend: str) -> float:
+    """The speed factor of an embedded flight (0: as fast as it can), after checking the live-view options."""
+    if backend == 'ros':
+        if args.live:
+            raise ParameterError('--live serves the embedded flight; for the ROS backend use Foxglove\'s ROS 2 '
+                                 'bridge (sudo apt install ros-jazzy-foxglove-bridge; ros2 launch foxglove_bridge '
+                                 'foxglove_bridge_launch.xml), or add --backend embedded')
+        return 0.0
+    if not args.live:
+        if args.live_wait:
+            raise ParameterError('--live-wait: waits for a client of the live view; add --live')
+        if args.speed_factor is not None:
+            raise ParameterError('--speed-factor: the embedded flight is paced only with --live (without it, it '
+                                 'flies as fast as it can)')
+        return 0.0
+    check_number('--live-port', args.live_port, 0, 65535)
+    return check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor, 0.0, 1000.0)
+
+
+def start_live_server(host: str, port: int):
+    """The live view's server, or an exit code after saying why it cannot be served."""
+    try:
+        from flight_stack.live_view import LiveServer, LiveViewError, is_loopback
+    except ImportError as error:   # foxglove-sdk is in requirements.txt, not in the ROS path's requirements
+        print(f'error: --live needs the foxglove-sdk package ({error}): pip install -r requirements.txt',
+              file=sys.stderr)
+        return 2
+    try:
+        server = LiveServer(host, port)
+    except LiveViewError as error:
+        print(f'error: {error} (--live-host, --live-port)', file=sys.stderr)
+        return 2
+    print(f'live view: {server.url} (Foxglove: Open connection -> Foxglove WebSocket -> {server.url})', flush=True)
+    if not is_loopback(host):
+        print(f'warning: the live view listens on {host}: anyone who can reach this address can watch the flight '
+              f'(there is no authentication)', flush=True)
+    return server
+
+
+def live_sinks(server, params, topics, speed_factor: float) -> list:
+    """The step sinks of a live flight: a pacer (unless as fast as possible), then the live view."""
+    from flight_stack.live_view import LiveView
+    from flight_stack.pacing import Pacer
+    return ([Pacer(speed_factor)] if speed_factor > 0.0 else []) + [LiveView(server, params, topics=topics)]
 
 
 def fly_on_ros(args, trajectory, duration: float, disturbances: bool, physics_rate: float, gains: dict,
@@ -113,7 +173,8 @@ def fly_on_ros(args, trajectory, duration: float, disturbances: bool, physics_ra
         namespace=args.namespace, controller=args.controller, scenario=args.scenario, duration=duration,
         disturbances=disturbances, seed=args.seed, physics_rate=physics_rate,
         control_rate=1.0 / control_period(gains), initial_state=trajectory.initial_state, bag=bag_path,
-        topics=[t.name for t in topics], mode=args.mode, speed_factor=args.speed_factor,
+        topics=[t.name for t in topics], mode=args.mode,
+        speed_factor=1.0 if args.speed_factor is None else args.speed_factor,
         extra_odom_subscribers=args.extra_subscribers,
         vehicle_file=args.vehicle, gains_file=args.gains, settle_time=settle_time, quiet=args.quiet))
     if result.failed_node:
@@ -158,10 +219,14 @@ def main(argv: list[str] | None = None) -> int:
         if duration <= settle_time:
             raise ParameterError(f'--duration: {duration:g} s leaves nothing after the settling window '
                                  f'(--settle-time {settle_time:g} s)')
+        backend = choose_backend(args.backend, args.live)
+        speed_factor = check_live_options(args, backend)
     except ParameterError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
-    backend = choose_backend(args.backend)
+    live_server = start_live_server(args.live_host, args.live_port) if args.live else None
+    if isinstance(live_server, int):
+        return live_server
     out_dir = args.out or Path('out') / f'{args.scenario}-{args.controller}'
     bag_path = None if args.no_bag else args.bag or out_dir / 'bag'
     print(f'flying {args.controller} on "{args.scenario}" for {duration:g} s '
@@ -176,14 +241,22 @@ def main(argv: list[str] | None = None) -> int:
         record, wall_time_s, extra = flown
     else:
         try:
-            with stop_signals() as stop:
+            with stop_signals() as stop, live_server or contextlib.nullcontext():
+                sinks = live_sinks(live_server, params, topics, speed_factor) if live_server else []
+                if live_server and args.live_wait:
+                    print('live view: waiting for a client to subscribe (Ctrl-C to stop)', flush=True)
+                    if not live_server.wait_for_subscriber(stop):
+                        print('interrupted before the flight', file=sys.stderr)
+                        return 130
                 recording = (FlightBag.create(bag_path, params, settle_time, topics=topics, overwrite=True,
                                               controller=args.controller, scenario=args.scenario, backend=backend,
                                               seed=args.seed)
                              if bag_path else contextlib.nullcontext())
                 with recording as bag:
                     result = fly_embedded(args.controller, trajectory, params, disturbances, gains, duration,
-                                          physics_rate, progress=not args.quiet, bag=bag, stop=stop)
+                                          physics_rate, progress=not args.quiet, bag=bag, stop=stop, sinks=sinks)
+                    for sink in sinks:
+                        sink.close()
         except KeyboardInterrupt:
             print('interrupted' + (f'; bag closed: {bag_path}' if bag_path else ''), file=sys.stderr)
             return 130

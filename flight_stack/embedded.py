@@ -13,7 +13,7 @@ import math
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Sequence
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
 from quad_msgs_bridge.bag.flight_bag import FlightBag
@@ -82,16 +82,19 @@ def through_odometry(t: float, state: list):
 def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, disturbances: Disturbances,
                  gains: dict, duration: float, physics_rate: float, setpoint_rate: float = 50.0,
                  progress: bool = False, bag: FlightBag | None = None,
-                 stop: Callable[[], bool] | None = None, perturbations: Perturbations | None = None,
+                 stop: Callable[[], bool] | None = None, sinks: Sequence = (),
+                 perturbations: Perturbations | None = None,
                  rules: FailureRules = FailureRules(settle_time=5.0, max_error=math.inf)) -> FlightResult:
     """Fly ``trajectory`` for ``duration`` [s] of sim time; one record row per control step.
 
     ``params`` is the controller's nominal model, and the vehicle flown unless ``perturbations``
     says otherwise. The record holds the true position; with sensor noise the bag's ``odom`` is
     what the controller read. With ``bag`` every step's contract messages are recorded too (the
-    caller closes the bag). ``stop`` is asked between two control steps: once it returns true the
-    flight raises KeyboardInterrupt, with every step so far complete in the bag. A flight that
-    breaks one of ``rules`` ends there (``FlightResult.failure`` says why).
+    caller closes the bag). ``sinks`` get the same calls after the bag, in order:
+    ``record_setpoints(path)`` once, then ``record_step(...)`` per step (e.g. a ``pacing.Pacer``,
+    then a ``live_view.LiveView``). ``stop`` is asked between two control steps: once it returns
+    true the flight raises KeyboardInterrupt, with every step so far complete in the bag. A flight
+    that breaks one of ``rules`` ends there (``FlightResult.failure`` says why).
     """
     perturbations = perturbations or Perturbations()
     controller = build_controller(controller_kind, params, gains)
@@ -107,8 +110,9 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     started = time.perf_counter()
-    if bag is not None:
-        bag.record_setpoints(published)
+    step_sinks = ([bag] if bag is not None else []) + list(sinks)
+    for sink in step_sinks:
+        sink.record_setpoints(published)
     for k in range(steps):
         if stop is not None and stop():
             raise KeyboardInterrupt(f'stopped after {k} control steps')
@@ -119,10 +123,10 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
                                             [a.corrective for a in axes])
         recorder.append(done.time, truth[:3], truth[PSI], reference.position, reference.yaw,
                         out.forces, out.controls, surfaces, equivalent, corrective)
-        if bag is not None:
-            truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
-            bag.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
-                            surfaces, equivalent, corrective, truth=truth_odometry)
+        truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
+        for sink in step_sinks:
+            sink.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
+                             surfaces, equivalent, corrective, truth=truth_odometry)
         if not loop.flying:
             break
         if progress and (k + 1) % report_every == 0:
