@@ -58,6 +58,7 @@ def main(argv: list[str]) -> int:
                              resume=args.resume, progress=not args.quiet,
                              vehicle_file=None if args.vehicle is None else str(args.vehicle),
                              gains_file=None if args.gains is None else str(args.gains))
+        options.worker_count()
         if args.replay is not None:
             from .replay import replay_flight
             return replay_flight(spec, out_dir, args.replay, options)

@@ -16,7 +16,7 @@ import os
 import signal
 import sys
 import time
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -40,6 +40,12 @@ class RunOptions:
     progress: bool = True
     vehicle_file: str | None = None
     gains_file: str | None = None
+
+    def worker_count(self) -> int:
+        """The local worker processes to use; ParameterError on an invalid --workers or --batch-size."""
+        _positive_int('--workers', self.workers)
+        _positive_int('--batch-size', self.batch_size)
+        return self.workers or os.cpu_count() or 1
 
 
 def _positive_int(name: str, value) -> int | None:
@@ -98,8 +104,9 @@ class _LocalPool:
     def submit(self, job):
         return self.executor.submit(fly_batch, job)
 
-    def wait(self, pending):
-        return wait(pending, return_when=FIRST_COMPLETED)
+    @staticmethod
+    def as_completed(futures):
+        return as_completed(futures)
 
     def close(self, cancel: bool) -> None:
         if cancel:
@@ -122,9 +129,9 @@ class _DaskPool:
     def submit(self, job):
         return self.client.submit(fly_batch, job, pure=False)
 
-    def wait(self, pending):
-        from distributed import wait as dask_wait
-        return dask_wait(list(pending), return_when='FIRST_COMPLETED')
+    def as_completed(self, futures):
+        from distributed import as_completed as dask_as_completed
+        return dask_as_completed(futures, loop=self.client.loop)
 
     def close(self, cancel: bool) -> None:
         self.client.close()
@@ -144,8 +151,7 @@ def run_campaign(spec: CampaignSpec, out_dir: Path, options: RunOptions) -> Camp
     Raises ParameterError on invalid options (before anything flies) and KeyboardInterrupt after
     stopping the workers on Ctrl-C (every finished batch is in flights.csv).
     """
-    workers = _positive_int('--workers', options.workers) or os.cpu_count() or 1
-    _positive_int('--batch-size', options.batch_size)
+    workers = options.worker_count()
     CampaignSetup.of(spec, options.vehicle_file, options.gains_file)   # files and rates valid before flying
     done = prepare_output(spec, out_dir, options.resume)
     jobs = plan_jobs(spec, done, options, workers)
@@ -157,14 +163,11 @@ def run_campaign(spec: CampaignSpec, out_dir: Path, options: RunOptions) -> Camp
     pool = _DaskPool(options.scheduler) if options.scheduler else _LocalPool(min(workers, max(1, len(jobs))))
     cancelled = False
     try:
-        pending = {pool.submit(job) for job in jobs}
-        while pending:
-            finished, pending = pool.wait(pending)
-            for future in finished:
-                rows = future.result()
-                flights.append(rows)
-                steps += sum(r['control_steps'] for r in rows)
-                progress.update(len(rows))
+        for future in pool.as_completed([pool.submit(job) for job in jobs]):
+            rows = future.result()
+            flights.append(rows)
+            steps += sum(r['control_steps'] for r in rows)
+            progress.update(len(rows))
     except BaseException:
         cancelled = True
         raise

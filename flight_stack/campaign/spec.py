@@ -190,11 +190,12 @@ def _controllers(value, key: str) -> tuple[str, ...]:
 
 
 def _mapping(value, key: str, allowed) -> Mapping:
+    """``value`` checked to be a mapping of known keys; ``key`` is its place in the spec ('' at the top)."""
     if not isinstance(value, Mapping):
-        raise ParameterError(f'{key}: expected a mapping, got {value!r}')
+        raise ParameterError(f'{key or "spec"}: expected a mapping, got {value!r}')
     for name in value:
         if name not in allowed:
-            raise ParameterError(f'{key}.{name}: unknown key (valid keys: {", ".join(allowed)})')
+            raise ParameterError(f'{key + "." if key else ""}{name}: unknown key (valid keys: {", ".join(allowed)})')
     return value
 
 
@@ -232,7 +233,7 @@ def _check_settling(spec: CampaignSpec, key: str) -> None:
 
 def parse_spec(document: Any, source: str = '') -> CampaignSpec:
     """Validate a spec mapping (see the module docstring); ParameterError names the offending key."""
-    top = _mapping(document if document is not None else {}, 'spec', TOP_KEYS)
+    top = _mapping(document if document is not None else {}, '', TOP_KEYS)
     for required in ('scenario', 'controllers', 'flights'):
         if required not in top:
             raise ParameterError(f'{required}: missing (required keys: scenario, controllers, flights)')
