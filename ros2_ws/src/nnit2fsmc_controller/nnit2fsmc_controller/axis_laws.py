@@ -56,6 +56,8 @@ class NNIT2FSMCLaw:
     hit the ground).
     """
 
+    STATE = ('_teaching',)   #: what a retune keeps (nnit2fsmc_controller.tuning); the network's is its own
+
     def __init__(self, lam: float, fuzzy: IT2FuzzyCorrector, network: EquivalentControlNetwork):
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
         self.fuzzy = fuzzy
@@ -81,6 +83,8 @@ class NNIT2FSMCLaw:
 class SlidingModeLaw:
     """Classic SMC with the nominal model's equivalent control and a sign or saturated switching term."""
 
+    STATE = ()
+
     def __init__(self, lam: float, switching_gain: float, boundary_layer: float = 0.0):
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
         self.switching_gain = check_number('switching_gain', switching_gain, 0.0)
@@ -105,6 +109,8 @@ class SlidingModeLaw:
 
 class PIDLaw:
     """PID on the error with feed-forward of the reference and of the nominal drift."""
+
+    STATE = ('integral',)
 
     def __init__(self, lam: float, kp: float, ki: float, kd: float, integral_limit: float, dt: float):
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)

@@ -65,6 +65,8 @@ class RateFilter:
     The first sample gives rate 0 (a batch starts all its vehicles together).
     """
 
+    STATE = ('previous', 'rate')   #: what a retune keeps (nnit2fsmc_controller.tuning)
+
     def __init__(self, dt: float, tau: float):
         self.blend = dt / (tau + dt)
         self.dt = dt
@@ -80,6 +82,8 @@ class RateFilter:
 
 class CascadedController:
     """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws."""
+
+    STATE = ()   #: its state lives in its laws and rate filters (nnit2fsmc_controller.tuning)
 
     def __init__(self, name: str, params: VehicleParams, laws: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02):

@@ -39,6 +39,8 @@ TYPE_REDUCERS = ('km', 'nie-tan')
 class IT2FuzzyCorrector:
     """u_fuzzy = output_gain * IT2FLS(S / input_scale); see the module docstring for the design."""
 
+    STATE = ()   #: stateless: a retune takes the new one whole
+
     def __init__(self, input_scale: float, output_gain: float, lower_height: float = 0.6,
                  lower_half_width: float = 0.35, type_reducer: str = 'km'):
         self.input_scale = check_number('input_scale', input_scale, 0.0, low_inclusive=False)

@@ -105,6 +105,9 @@ class ArrayLayers:
 class EquivalentControlNetwork:
     """U_eq_hat = K_eq g(Wy . g(Wz Z)); online gradient learning from the fuzzy term."""
 
+    #: what a retune keeps (nnit2fsmc_controller.tuning): the weights and the last forward pass
+    STATE = ('hidden_weights', 'output_weights', '_inputs', '_hidden', '_output')
+
     def __init__(self, n_inputs: int, n_hidden: int, output_gain: float, learning_rate: float,
                  weight_limit: float = 10.0, initial_spread: float = 0.5, seed: int = 0,
                  batch: int | None = None):
