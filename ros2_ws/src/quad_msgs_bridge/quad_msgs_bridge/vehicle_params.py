@@ -27,10 +27,13 @@ def check_number(name: str, value: Any, low: float = -math.inf, high: float = ma
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(f'{name}: expected a number, got {value!r}')
     value = float(value)
-    below = value < low if low_inclusive else value <= low
-    if not math.isfinite(value) or below or value > high:
-        bracket = '[' if low_inclusive else '('
-        raise ParameterError(f'{name}: {value!r} is outside the valid range {bracket}{low}, {high}]')
+    interval = (f'{"[" if low_inclusive and math.isfinite(low) else "("}{low}, '
+                f'{high}{"]" if math.isfinite(high) else ")"}')
+    if not math.isfinite(value):
+        bounded = math.isfinite(low) or math.isfinite(high)
+        raise ParameterError(f'{name}: must be finite, got {value!r}' + (f' (valid range {interval})' if bounded else ''))
+    if (value < low if low_inclusive else value <= low) or value > high:
+        raise ParameterError(f'{name}: {value!r} is outside the valid range {interval}')
     return value
 
 

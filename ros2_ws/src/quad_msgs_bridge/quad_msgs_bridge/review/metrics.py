@@ -13,6 +13,23 @@ from dataclasses import dataclass, field
 import numpy as np
 
 SUBSYSTEMS = ('x', 'y', 'z', 'phi', 'theta', 'psi')
+SETTLE_TIME = 5.0           #: [s] take-off and convergence left out of the metrics (flights of 10 s or more)
+SHARE_WINDOW = 5.0          #: [s] windows of the fuzzy share in the metrics
+#: controllers whose corrective term (``control/diagnostics``) is the IT2 fuzzy term; that of the sliding
+#: mode baselines is their switching term, that of the PID zero, so they have no fuzzy share
+FUZZY_CONTROLLERS = ('nnit2fsmc',)
+
+
+def default_settle_time(duration: float) -> float:
+    """The settling window [s] of a flight of ``duration`` [s] when none is given: 5 s, or half the
+    flight when it is shorter than 10 s (so a short flight keeps half of its steps for the metrics)."""
+    return min(SETTLE_TIME, 0.5 * duration)
+
+
+def has_fuzzy_term(controller: str | None) -> bool:
+    """Whether the flight's corrective terms are fuzzy terms: true for the FUZZY_CONTROLLERS, and for a
+    flight of unknown controller (the contract names the diagnostics' corrective column fuzzy)."""
+    return controller is None or controller in FUZZY_CONTROLLERS
 
 
 @dataclass
@@ -71,7 +88,7 @@ def fuzzy_share(record: FlightRecord, window: float) -> dict[str, list[float]]:
 
 
 def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max: float,
-                   share_window: float = 5.0) -> dict:
+                   share_window: float = SHARE_WINDOW, fuzzy_term: bool = True) -> dict:
     """Tracking, chattering and saturation figures of a flight, after ``settle_time`` [s].
 
     * rmse_position_m, max_position_error_m: Euclidean position error [m];
@@ -79,12 +96,15 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
     * chattering: total variation of each of U1..U4 per second of flight [N/s; U4: N m/s];
     * saturation_fraction: share of control steps with any rotor at F_min or F_max (and the same
       over the whole flight, saturation_fraction_whole_flight);
-    * fuzzy_share: see :func:`fuzzy_share`, over the whole flight.
+    * fuzzy_share: see :func:`fuzzy_share`, over the whole flight; None without a fuzzy term
+      (``fuzzy_term`` false, see :func:`has_fuzzy_term`).
     """
     settled = record.time >= record.time[0] + settle_time
     if settled.sum() < 2:
-        raise ValueError(f'flight of {record.time[-1] - record.time[0]:.3f} s is shorter than the '
-                         f'settling window {settle_time} s')
+        duration = record.time[-1] - record.time[0]
+        raise ValueError(f'the flight of {duration:.3f} s is not longer than the settling window of {settle_time:g} s; '
+                         f'pass a settle time below {duration:.3f} s (e.g. --settle-time '
+                         f'{default_settle_time(duration):.3g})')
     error = np.linalg.norm(record.position - record.reference_position, axis=1)[settled]
     yaw_error = _wrap(record.yaw - record.reference_yaw)[settled]
     t = record.time[settled]
@@ -105,5 +125,5 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
         'saturation_fraction_whole_flight': float(at_limit.mean()),
         'all_finite': bool(np.isfinite(record.forces).all() and np.isfinite(record.position).all()),
         'fuzzy_share_window_s': float(share_window),
-        'fuzzy_share': fuzzy_share(record, share_window),
+        'fuzzy_share': fuzzy_share(record, share_window) if fuzzy_term else None,
     }
