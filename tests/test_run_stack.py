@@ -18,6 +18,7 @@ from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.flight_bag import FlightBag
 from quad_msgs_bridge.bag.metadata import read_metadata
 from quad_msgs_bridge.bag.reader import is_finalized, mcap_file
+from quad_msgs_bridge.review.metrics import default_settle_time
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -251,3 +252,8 @@ def test_help_is_plain_text(command, capsys):
     assert text.startswith('usage: ')
     for markup in (':mod:', ':func:', ':class:', ':meth:', '``'):
         assert markup not in text, markup
+
+
+@pytest.mark.parametrize('duration, settle', [(60.0, 5.0), (10.0, 5.0), (5.0, 2.5), (1.0, 0.5)])
+def test_the_default_settling_window_is_5_s_or_half_a_short_flight(duration, settle):
+    assert default_settle_time(duration) == settle

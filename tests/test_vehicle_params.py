@@ -122,3 +122,17 @@ def test_check_number_bounds():
     with pytest.raises(ParameterError, match='k'):
         check_number('k', 1.5, 0.0, 1.0)
     assert isinstance(check_number('k', 3, 0.0), float)
+
+
+@pytest.mark.parametrize('value, low, high, low_inclusive, message', [
+    (math.inf, 0.0, math.inf, True, 'x: must be finite, got inf (valid range [0.0, inf))'),
+    (math.nan, 0.0, math.inf, False, 'x: must be finite, got nan (valid range (0.0, inf))'),
+    (-math.inf, -math.inf, math.inf, True, 'x: must be finite, got -inf'),
+    (-1.0, 0.0, math.inf, False, 'x: -1.0 is outside the valid range (0.0, inf)'),
+    (7.0, -math.inf, 5.0, True, 'x: 7.0 is outside the valid range (-inf, 5.0]'),
+])
+def test_range_errors_read_as_intervals(value, low, high, low_inclusive, message):
+    """An infinite bound is an open end: never 'inf is outside the valid range (0.0, inf]'."""
+    with pytest.raises(ParameterError) as error:
+        check_number('x', value, low, high, low_inclusive=low_inclusive)
+    assert str(error.value) == message
