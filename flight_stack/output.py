@@ -120,22 +120,22 @@ class RunOutput:
 
     def __init__(self, out_dir: Path, bag: Path | None, overwrite: bool):
         self.out_dir, self.bag_path = Path(out_dir), None if bag is None else Path(bag)   #: as given
-        self._out = _Target(self.out_dir, RUN_ENTRIES)
         self._bag: _Target | None = None
-        self._bag_entry: str | None = None
+        self._bag_entry: str | None = None      #: name of a bag directly in the output folder
+        if self.bag_path is not None and _absolute(self.bag_path).parent == _absolute(self.out_dir):
+            self._bag_entry = self.bag_path.name
+        entries = RUN_ENTRIES + ((self._bag_entry,) if self._bag_entry not in (None, *RUN_ENTRIES) else ())
+        self._out = _Target(self.out_dir, entries)
         self._check_out(overwrite)
-        if self.bag_path is not None:
-            if _absolute(self.bag_path).parent == _absolute(self.out_dir):
-                self._bag_entry = self.bag_path.name
-            else:
-                self._check_separate_bag(overwrite)
-                self._bag = _Target(self.bag_path, None)
+        if self.bag_path is not None and self._bag_entry is None:
+            self._check_separate_bag(overwrite)
+            self._bag = _Target(self.bag_path, None)
 
     def _check_out(self, overwrite: bool) -> None:
         out = self.out_dir
         if out.exists() and not out.is_dir():
             raise ParameterError(f'--out: {out} exists and is not a folder')
-        earlier = [name for name in RUN_ENTRIES if (out / name).exists()] if out.is_dir() else []
+        earlier = [name for name in self._out.entries if (out / name).exists()] if out.is_dir() else []
         if earlier and not overwrite:
             raise ParameterError(f'--out: {out} holds an earlier run ({", ".join(earlier)}); pass --overwrite to '
                                  'replace it, or choose another --out')

@@ -129,3 +129,18 @@ def test_an_unwritable_place_is_refused_before_the_run(tmp_path, make_parent):
     with pytest.raises(ParameterError, match='--out: cannot write into /sys'):
         output.create()
 
+
+
+def test_a_bag_of_another_name_in_the_output_folder_belongs_to_the_run(tmp_path):
+    out = tmp_path / 'run'
+    out.mkdir()
+    (out / 'flight7').mkdir()
+    (out / 'flight7' / 'metadata.yaml').write_text('old')
+    with pytest.raises(ParameterError, match=r'holds an earlier run \(flight7\)'):
+        RunOutput(out, out / 'flight7', overwrite=False)
+    output = RunOutput(out, out / 'flight7', overwrite=True)
+    output.create()
+    output.bag.mkdir()
+    (output.bag / 'flight7_0.mcap').write_bytes(b'new')
+    output.commit()
+    assert snapshot(out) == {'flight7/flight7_0.mcap': b'new'}
