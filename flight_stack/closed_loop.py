@@ -34,12 +34,16 @@ from quad_sim.simulator import Simulator
 FAILURES = ('non-finite state', 'flipped over', 'crashed', 'position error above max_error')
 
 
+#: [m] height above which a vehicle counts as airborne: once it was, touching the ground is a crash
+AIRBORNE_HEIGHT = 0.05
+
+
 @dataclass(frozen=True)
 class FailureRules:
-    """When a flight has failed. Crash and tracking checks start after ``settle_time`` [s]
-    (the vehicle takes off from the ground): non-finite state (any time), flipped over (thrust axis
-    pointing down: cos(phi) cos(theta) <= 0, any time), crashed (on the ground, z <= 0), position
-    error above ``max_error`` [m]."""
+    """When a flight has failed: non-finite state, flipped over (thrust axis pointing down:
+    cos(phi) cos(theta) <= 0), crashed (back on the ground, z <= 0, after having been above
+    AIRBORNE_HEIGHT: a vehicle waiting on the ground to take off has not crashed), and, after
+    ``settle_time`` [s], a position error above ``max_error`` [m]."""
 
     settle_time: float
     max_error: float
@@ -90,6 +94,8 @@ class ClosedLoop:
         self.failure = np.full(shape, -1) if batch else -1
         #: [s] sim time at which each vehicle failed (nan while flying)
         self.failure_time = np.full(shape, np.nan) if batch else float('nan')
+        #: whether each vehicle has been above AIRBORNE_HEIGHT
+        self.airborne = np.zeros(shape, dtype=bool) if batch else False
 
     @property
     def flying(self):
@@ -122,8 +128,10 @@ class ClosedLoop:
         code = xp.where(finite, -1, 0)
         phi, theta = xp.where(finite, state[PHI], 0.0), xp.where(finite, state[THETA], 0.0)
         code = xp.where((code < 0) & (xp.cos(phi) * xp.cos(theta) <= 0.0), 1, code)
+        height = xp.where(finite, state[Z], 0.0)
+        code = xp.where((code < 0) & self.airborne & (height <= 0.0), 2, code)
+        self.airborne = self.airborne | (height > AIRBORNE_HEIGHT)
         if t >= self.rules.settle_time:
-            code = xp.where((code < 0) & (state[Z] <= 0.0), 2, code)
             with np.errstate(invalid='ignore', over='ignore'):
                 error = xp.sqrt(sum((p - r) * (p - r) for p, r in zip(state[:3], reference.position)))
             code = xp.where((code < 0) & (error > self.rules.max_error), 3, code)

@@ -18,6 +18,8 @@ from pathlib import Path
 
 import yaml
 
+from quad_msgs_bridge.bag.flight_bag import disturbances_label
+
 from .processes import NodeProcess, node_command, source_tree_environment, wait_for_exit
 
 
@@ -76,7 +78,8 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     nodes = [
         ('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.bag.recorder_node',
          {'bag': str(config.bag), 'overwrite': True, 'topics': config.topics, 'controller': config.controller,
-          'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time, **vehicle}),
+          'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time,
+          'disturbances': disturbances_label(config.disturbances), **vehicle}),
         ('trajectory', 'nnit2fsmc_controller', 'trajectory', 'nnit2fsmc_controller.trajectory_node',
          # the path start is given in sim time and the node reads no clock after it: no use_sim_time, so it
          # does not wake for every /clock message (that cost a third of the lockstep rate here)

@@ -3,6 +3,7 @@ topics with their ROS 2 schemas, decodes the odometry with the rosbags Jazzy typ
 topic it subscribed to late, and leaves mid-flight without stopping it; the bag of a live flight equals
 the bag of the same flight without --live; the live options fail cleanly."""
 import json
+import re
 import math
 import signal
 import socket
@@ -192,7 +193,8 @@ def test_ctrl_c_closes_the_server_and_the_bag(tmp_path):
         if process.poll() is None:
             process.kill()
     assert process.returncode == 130 and 'interrupted; bag closed' in stderr
-    bag = tmp_path / 'bag'
+    bag = Path(re.search(r'bag closed: (\S+)', stderr).group(1))     # kept in the unfinished run's folder
+    assert not (tmp_path / 'bag').exists()                              # --out holds no partial run
     assert is_finalized(mcap_file(bag))
     recorded = messages(bag)
     counts = {t['topic_metadata']['name']: t['message_count'] for t in read_metadata(bag)['topics_with_message_count']}

@@ -141,10 +141,10 @@ def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
     from flight_stack.processes import source_tree_environment
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
-    bag = tmp_path / 'bag'
+    out = tmp_path / 'run'
     stack = subprocess.Popen(
         [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', '--namespace', 'killed', '--duration', '60',
-         '--out', str(tmp_path), '--bag', str(bag), '--quiet'],
+         '--out', str(out), '--quiet'],
         env=source_tree_environment(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 60.0
@@ -152,7 +152,7 @@ def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
         while controller_pid is None and time.monotonic() < deadline:
             found = subprocess.run(['pgrep', '-f', 'controller_node.*__ns:=/killed'], capture_output=True, text=True)
             pids = found.stdout.split()
-            if pids and (bag / 'metadata.yaml').exists():
+            if pids and list(tmp_path.glob('run.incomplete-*/bag/metadata.yaml')):   # the run's staging folder
                 time.sleep(3.0)          # well into the flight
                 controller_pid = int(pids[0])
             else:
@@ -167,6 +167,9 @@ def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
     assert 'controller' in output and 'failed' in output
     leftovers = subprocess.run(['pgrep', '-f', '__ns:=/killed'], capture_output=True, text=True).stdout.split()
     assert leftovers == [], 'nodes left running after the entry script exited'
+    assert not out.exists()     # an unfinished run leaves nothing in --out; its bag stays in the staging folder
+    [bag] = tmp_path.glob('run.incomplete-*/bag')
+    assert f'the bag is closed: {bag}' in output
     flight = read_flight(bag)   # the recorder finalized what it had: readable, a prefix of the flight
     assert 1.0 < flight.record.time[-1] < 59.0
 

@@ -169,7 +169,7 @@ def test_json_round_trip_of_a_perturbed_vehicle():
     ('cog_offset', [0.0, math.nan, 0.0], r'vehicle\.cog_offset\[1\]'),
     ('cog_offset', [0.3, 0.0, 0.0], r'vehicle\.cog_offset: x = 0\.3 m is not within the arm length'),
     ('rotor_thrust_factors', [1.0, 1.0, 0.0, 1.0],
-     r'vehicle\.rotor_thrust_factors\[2\]: 0\.0 is outside the valid range \(0\.0, inf\]'),
+     r'vehicle\.rotor_thrust_factors\[2\]: 0\.0 is outside the valid range \(0\.0, inf\)'),
     ('rotor_thrust_factors', [1.0, 1.0, 1.0], r'vehicle\.rotor_thrust_factors: expected a list of 4'),
     ('rotor_thrust_factors', 'strong', r'vehicle\.rotor_thrust_factors: expected a list of 4'),
     ('rotor_drag_factors', [1.0, -1.0, 1.0, 1.0], r'vehicle\.rotor_drag_factors\[1\]'),
@@ -216,3 +216,17 @@ def test_stack_makes_a_batch_with_one_element_per_vehicle():
 def test_batch_values_are_checked_per_vehicle(changes, fragment):
     with pytest.raises(ParameterError, match=fragment):
         dataclasses.replace(load_vehicle_file()[0], **changes)
+
+
+@pytest.mark.parametrize('value, low, high, low_inclusive, message', [
+    (math.inf, 0.0, math.inf, True, 'x: must be finite, got inf (valid range [0.0, inf))'),
+    (math.nan, 0.0, math.inf, False, 'x: must be finite, got nan (valid range (0.0, inf))'),
+    (-math.inf, -math.inf, math.inf, True, 'x: must be finite, got -inf'),
+    (-1.0, 0.0, math.inf, False, 'x: -1.0 is outside the valid range (0.0, inf)'),
+    (7.0, -math.inf, 5.0, True, 'x: 7.0 is outside the valid range (-inf, 5.0]'),
+])
+def test_range_errors_read_as_intervals(value, low, high, low_inclusive, message):
+    """An infinite bound is an open end: never 'inf is outside the valid range (0.0, inf]'."""
+    with pytest.raises(ParameterError) as error:
+        check_number('x', value, low, high, low_inclusive=low_inclusive)
+    assert str(error.value) == message

@@ -44,11 +44,15 @@ def check_number(name: str, value: Any, low: float = -math.inf, high: float = ma
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(f'{name}: expected a number, got {value!r}')
     value = float(value)
+    closed_low, closed_high = low_inclusive and math.isfinite(low), high_inclusive and math.isfinite(high)
+    interval = f'{"[" if closed_low else "("}{low}, {high}{"]" if closed_high else ")"}'
+    if not math.isfinite(value):
+        bounded = math.isfinite(low) or math.isfinite(high)
+        raise ParameterError(f'{name}: must be finite, got {value!r}' + (f' (valid range {interval})' if bounded else ''))
     below = value < low if low_inclusive else value <= low
     above = value > high if high_inclusive else value >= high
-    if not math.isfinite(value) or below or above:
-        opening, closing = '[' if low_inclusive else '(', ']' if high_inclusive else ')'
-        raise ParameterError(f'{name}: {value!r} is outside the valid range {opening}{low}, {high}{closing}')
+    if below or above:
+        raise ParameterError(f'{name}: {value!r} is outside the valid range {interval}')
     return value
 
 

@@ -38,6 +38,11 @@ def select_topics(names: Sequence[str] | None) -> tuple[TopicSpec, ...]:
     return tuple(by_name[name] for name in dict.fromkeys(names))
 
 
+def disturbances_label(enabled: bool) -> str:
+    """The bag's custom data ``disturbances`` of a flight (words a ROS string parameter keeps as a string)."""
+    return 'enabled' if enabled else 'disabled'
+
+
 def flight_custom_data(params: VehicleParams, settle_time: float, **info) -> dict[str, str]:
     """Bag custom data of a flight: vehicle parameters (JSON), settle time [s] and labels (controller, ...)."""
     return {'vehicle': json.dumps(dataclasses.asdict(params)), 'settle_time_s': repr(float(settle_time)),

@@ -16,6 +16,23 @@ from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.numeric import namespace_for
 
 SUBSYSTEMS = ('x', 'y', 'z', 'phi', 'theta', 'psi')
+SETTLE_TIME = 5.0           #: [s] take-off and convergence left out of the metrics (flights of 10 s or more)
+SHARE_WINDOW = 5.0          #: [s] windows of the fuzzy share in the metrics
+#: controllers whose corrective term (``control/diagnostics``) is the IT2 fuzzy term; that of the sliding
+#: mode baselines is their switching term, that of the PID zero, so they have no fuzzy share
+FUZZY_CONTROLLERS = ('nnit2fsmc',)
+
+
+def default_settle_time(duration: float) -> float:
+    """The settling window [s] of a flight of ``duration`` [s] when none is given: 5 s, or half the
+    flight when it is shorter than 10 s (so a short flight keeps half of its steps for the metrics)."""
+    return min(SETTLE_TIME, 0.5 * duration)
+
+
+def has_fuzzy_term(controller: str | None) -> bool:
+    """Whether the flight's corrective terms are fuzzy terms: true for the FUZZY_CONTROLLERS, and for a
+    flight of unknown controller (the contract names the diagnostics' corrective column fuzzy)."""
+    return controller is None or controller in FUZZY_CONTROLLERS
 
 
 @dataclass
@@ -198,17 +215,25 @@ def tracking_metrics(stats: TrackingStatistics) -> dict:
 
 
 def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max: float,
-                   share_window: float = 5.0) -> dict:
+                   share_window: float = SHARE_WINDOW, fuzzy_term: bool = True, ended_early: bool = False) -> dict:
     """Tracking, chattering and saturation figures of a flight, after ``settle_time`` [s].
 
     The figures of :func:`tracking_metrics`, plus the flight's duration and step count, whether
-    every force and position is finite, and fuzzy_share (see :func:`fuzzy_share`, whole flight).
+    every force and position is finite, and fuzzy_share (see :func:`fuzzy_share`, over the whole
+    flight; None without a fuzzy term: ``fuzzy_term`` false, see :func:`has_fuzzy_term`). A flight
+    that ``ended_early`` (failed) before two settled steps has NaN tracking figures; any other flight
+    that short is refused (ValueError).
     """
     stats = record_statistics(record, settle_time, f_min, f_max)
-    if stats.settled_steps < 2:
-        raise ValueError(f'flight of {record.time[-1] - record.time[0]:.3f} s is shorter than the '
-                         f'settling window {settle_time} s')
+    if stats.settled_steps < 2 and not ended_early:
+        duration = record.time[-1] - record.time[0]
+        raise ValueError(f'the flight of {duration:.3f} s is not longer than the settling window of {settle_time:g} s; '
+                         f'pass a settle time below {duration:.3f} s (e.g. --settle-time '
+                         f'{default_settle_time(duration):.3g})')
     tracking = tracking_metrics(stats)
+    if stats.settled_steps < 2:
+        tracking = {key: ({k: math.nan for k in value} if isinstance(value, dict) else math.nan)
+                    for key, value in tracking.items()}
     return {
         'settle_time_s': float(settle_time),
         'duration_s': float(record.time[-1] - record.time[0]),
@@ -221,5 +246,5 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
         'saturation_fraction_whole_flight': float(tracking['saturation_fraction_whole_flight']),
         'all_finite': bool(np.isfinite(record.forces).all() and np.isfinite(record.position).all()),
         'fuzzy_share_window_s': float(share_window),
-        'fuzzy_share': fuzzy_share(record, share_window),
+        'fuzzy_share': fuzzy_share(record, share_window) if fuzzy_term else None,
     }
