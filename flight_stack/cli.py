@@ -191,7 +191,8 @@ class Flown:
     failure: str | None = None      #: why the flight ended early (flight_stack.closed_loop.FAILURES), if it did
 
 
-def fly_here(args, plan, bag: Path | None, bag_shown: Path | None, live_server=None, speed_factor: float = 0.0) -> Flown:
+def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_server=None,
+             speed_factor: float = 0.0, live_wait: bool = False) -> Flown:
     """The embedded backend; with ``bag``, the flight to review is the record in memory (what the bag holds)."""
     from flight_stack.closed_loop import FailureRules
     from flight_stack.embedded import fly_embedded
@@ -200,7 +201,7 @@ def fly_here(args, plan, bag: Path | None, bag_shown: Path | None, live_server=N
 
     with stop_signals() as stop, live_server or contextlib.nullcontext():
         sinks = live_sinks(live_server, plan.params, plan.topics, speed_factor) if live_server else []
-        if live_server and args.live_wait:
+        if live_server and live_wait:
             print('live view: waiting for a client to subscribe (Ctrl-C to stop)', flush=True)
             if not live_server.wait_for_subscriber(stop):
                 raise KeyboardInterrupt('stopped before the flight')
@@ -210,7 +211,7 @@ def fly_here(args, plan, bag: Path | None, bag_shown: Path | None, live_server=N
                      if bag else contextlib.nullcontext())
         with recording as written:
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
-                                  plan.duration, plan.physics_rate, progress=not args.quiet, bag=written, stop=stop,
+                                  plan.duration, plan.physics_rate, progress=progress, bag=written, stop=stop,
                                   sinks=sinks, rules=FailureRules(plan.settle_time, max_error=math.inf))
             for sink in sinks:
                 sink.close()
@@ -343,10 +344,46 @@ def unfinished(output, message: str, code: int) -> int:
     return code
 
 
+def summarize(flown: Flown, plan, backend: str) -> dict:
+    """The summary of a flown flight (metrics, outcome, settings)."""
+    from flight_stack.summary import build_summary
+    summary = build_summary(flown.record, backend=backend, controller=plan.controller, scenario=plan.scenario,
+                            seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
+                            disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
+                            wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure)
+    summary.update(flown.extra)
+    return summary
+
+
+def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = False, vehicle=None, gains=None,
+               **settings) -> dict:
+    """One embedded flight without the command line (flight_stack.api.fly): its summary; with ``out``
+    the run is written there as the command writes it. ParameterError before flying on a bad setting."""
+    from flight_stack.output import RunOutput
+    from flight_stack.plan import plan_flight
+    from flight_stack.summary import write_summary
+    plan = plan_flight(controller, scenario, vehicle_file=vehicle, gains_file=gains, **settings)
+    if out is None:
+        return summarize(fly_here(plan, None, None), plan, 'embedded')
+    out = Path(out)
+    output = RunOutput(out, out / 'bag', overwrite)
+    output.create()
+    try:
+        flown = fly_here(plan, output.bag, out / 'bag')
+        summary = summarize(flown, plan, 'embedded')
+        write_summary(summary, output.out)
+        review_now(flown, plan, output.out)
+        output.commit()
+    except BaseException:
+        output.keep_partial()
+        raise
+    return summary
+
+
 def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, live_server=None,
                    speed_factor: float = 0.0) -> int:
     """Fly, write summary and review into the staged output, then move it into place."""
-    from flight_stack.summary import build_summary, format_summary, write_summary
+    from flight_stack.summary import format_summary, write_summary
     from quad_msgs_bridge.bag.mcap_file import BagWriteError
 
     try:
@@ -354,18 +391,14 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
             with tempfile.TemporaryDirectory(prefix='nnit2fsmc-') as scratch:   # --no-bag: the bag is read, then goes
                 flown = fly_on_ros(args, plan, output.bag or Path(scratch) / 'bag', bag_shown)
         else:
-            flown = fly_here(args, plan, output.bag, bag_shown, live_server, speed_factor)
+            flown = fly_here(plan, output.bag, bag_shown, not args.quiet, live_server, speed_factor, args.live_wait)
     except KeyboardInterrupt:
         return unfinished(output, 'interrupted' + (f'; bag closed: {output.bag}' if output.bag else ''), 130)
     except FlightStopped as stopped:
         return unfinished(output, f'error: {stopped}', stopped.code)
     except BagWriteError as error:
         return unfinished(output, f'error: {error}', 1)
-    summary = build_summary(flown.record, backend=backend, controller=plan.controller, scenario=plan.scenario,
-                            seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
-                            disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
-                            wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure)
-    summary.update(flown.extra)
+    summary = summarize(flown, plan, backend)
     write_summary(summary, output.out)
     review_lines, report = review_now(flown, plan, output.out) if flown.flight is not None else ([], None)
     output.commit()
