@@ -10,7 +10,9 @@ What it measures (every figure the median of several repeats, the configurations
    bookkeeping of settled steps, statistics and the crash and tracking checks, thus runs on the
    last 20 ms only: about 4 % of a step at N = 1,000 when it runs, not in these figures). "loop"
    counts the closed-loop steps only (first to last ClosedLoop.step); "end to end" is the whole
-   fly_batch call (sampling the flights, building the batch, the rows).
+   fly_batch call (sampling the flights, building the batch, the rows). "failed" counts the flights
+   a failure rule stopped (mostly perturbed vehicles flipping over or off track once the checks
+   start): they stay in the batch, frozen, and the rates count the steps flown only.
 2. N = 1,000 flights on both cores: two processes side by side, 500 flights each, started
    together after their imports, against one process flying all 1,000; and one ``run_campaign``
    with two workers (process start-up included).
@@ -31,7 +33,7 @@ core). Ratios taken side by side in one run mean more than any lone figure.
 Run from the repository root (not part of the test suite):
 
     .venv/bin/python bench/bench_campaign.py --quick    # about 5 minutes
-    .venv/bin/python bench/bench_campaign.py            # about 15 minutes
+    .venv/bin/python bench/bench_campaign.py            # about 11 minutes
 """
 from __future__ import annotations
 
