@@ -4,7 +4,7 @@ import pytest
 
 from quad_msgs_bridge.vehicle_params import ParameterError
 from quad_sim.perturbations import BLOCK_STEPS, FlightStreams, SensorErrors, SensorNoise, Wind, flight_streams
-from quad_sim.perturbations.streams import StandardNormals
+from quad_sim.perturbations.streams import REFILL_CHUNK, StandardNormals
 
 
 def test_streams_are_the_spawned_children_of_the_flights_seed_sequence():
@@ -64,3 +64,14 @@ def test_standard_normals_continue_the_generators_sequence_across_blocks():
         assert isinstance(row[0], float)
         assert row == reference[k].tolist()
         np.testing.assert_array_equal(batch.next()[:, 1], reference[k])
+
+
+def test_every_vehicle_of_a_batch_larger_than_a_refill_chunk_draws_its_own_sequence():
+    """A batch of two refill chunks and a part of a third: vehicle k's draws are generator k's own,
+    in order, across two blocks (the chunks are only a way to fill a block)."""
+    size, width = 2 * REFILL_CHUNK + 5, 4
+    batch = StandardNormals([np.random.default_rng(100 + k) for k in range(size)], width)
+    rows = np.array([batch.next() for _ in range(2 * BLOCK_STEPS)])    # (step, draw, vehicle)
+    for k in (0, REFILL_CHUNK - 1, REFILL_CHUNK, 2 * REFILL_CHUNK, size - 1):
+        reference = np.random.default_rng(100 + k).standard_normal((2 * BLOCK_STEPS, width))
+        np.testing.assert_array_equal(rows[:, :, k], reference)

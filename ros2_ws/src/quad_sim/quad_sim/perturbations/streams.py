@@ -23,6 +23,10 @@ from quad_msgs_bridge.vehicle_params import ParameterError
 #: 10,000 vehicles holds 123 MB for the widest consumer (twice that while refilling); the B Python
 #: calls of a refill are spread over 128 steps.
 BLOCK_STEPS = 128
+#: Vehicles whose draws are transposed into a batch's block at a time, and the padding [values] of
+#: their scratch rows (a speed choice only: the draws are the same whatever they are).
+REFILL_CHUNK = 64
+SCRATCH_PAD = 8
 
 
 class FlightStreams(NamedTuple):
@@ -103,8 +107,17 @@ class StandardNormals:
         if self._size is None:
             self._block = self._rng.standard_normal(shape).tolist()
         else:
-            block = np.empty((self._size, *shape))
-            for generator, rows in zip(self._rng, block):
-                generator.standard_normal(shape, out=rows)
-            self._block = np.ascontiguousarray(block.transpose(1, 2, 0))   # (step, draw, vehicle)
+            # (step, draw, vehicle). Each generator fills its own rows of a small scratch that stays
+            # in cache, transposed into the block REFILL_CHUNK vehicles at a time; the scratch rows are
+            # padded so that they do not all fall on the same cache sets (a multiple of 4 kB apart).
+            block = np.empty((*shape, self._size))
+            count = BLOCK_STEPS * self._width
+            scratch = np.empty((REFILL_CHUNK, count + SCRATCH_PAD))
+            draws = scratch[:, :count].reshape(REFILL_CHUNK, *shape)
+            for start in range(0, self._size, REFILL_CHUNK):
+                generators = self._rng[start:start + REFILL_CHUNK]
+                for generator, rows in zip(generators, scratch):
+                    generator.standard_normal(count, out=rows[:count])
+                block[:, :, start:start + len(generators)] = draws[:len(generators)].transpose(1, 2, 0)
+            self._block = block
         self._row = 0
