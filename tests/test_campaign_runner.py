@@ -154,3 +154,15 @@ def test_bad_options_are_refused_before_flying(tmp_path, args, message):
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 2 and stderr.startswith(f'error: {message}'), stderr
     assert not (tmp_path / 'out' / 'flights.csv').exists()
+
+
+def test_a_campaign_without_perturbations_reports_cleanly(tmp_path):
+    """Every flight identical (nothing random): the summary and the plots still come out."""
+    spec = parse_spec({'scenario': 'hover', 'duration': 1.0, 'settle_time': 0.6, 'controllers': ['pid'],
+                       'flights': 2, 'control_rate_hz': 250})
+    run_campaign(spec, tmp_path, RunOptions(workers=1, progress=False))
+    rows = list(rows_by_key(tmp_path).values())
+    assert rows[0]['rmse_position_m'] == rows[1]['rmse_position_m']
+    summary = json.loads((tmp_path / 'campaign.json').read_text())
+    assert summary['controllers']['pid']['rmse_position_m']['p50'] == pytest.approx(rows[0]['rmse_position_m'])
+    assert (tmp_path / 'plots' / 'boxplots.png').exists()

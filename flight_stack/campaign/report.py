@@ -51,8 +51,11 @@ def _plots(rows: list[dict], controllers: list[str], plot_dir: Path) -> list[tup
         values = np.sort([r['rmse_position_m'] * 100 for r in finished[c]])
         if values.size:
             axes.step(values, np.arange(1, values.size + 1) / values.size, where='post', label=c)
-    axes.set_xscale('log')
-    axes.set_xlabel('position RMSE after settling [cm] (log)')
+    spread = [r['rmse_position_m'] for c in controllers for r in finished[c]]
+    logarithmic = bool(spread) and min(spread) > 0.0 and max(spread) > min(spread)
+    if logarithmic:
+        axes.set_xscale('log')
+    axes.set_xlabel('position RMSE after settling [cm]' + (' (log)' if logarithmic else ''))
     axes.set_ylabel('fraction of finished flights')
     axes.set_title('RMSE CDF per controller (finished flights)')
     axes.grid(True, which='both', alpha=0.3)
@@ -69,8 +72,12 @@ def _plots(rows: list[dict], controllers: list[str], plot_dir: Path) -> list[tup
                 for c in controllers]
         axes.boxplot(data, whis=(1, 99), showfliers=True)
         axes.set_xticks(range(1, len(controllers) + 1), controllers, rotation=20)
-        axes.set_yscale('log')
-        axes.set_ylabel(label + ' (log)')
+        values = np.concatenate([np.asarray(d, dtype=float) for d in data])
+        values = values[np.isfinite(values)]
+        logarithmic = values.size > 0 and values.min() > 0.0 and values.max() > values.min()
+        if logarithmic:
+            axes.set_yscale('log')
+        axes.set_ylabel(label + (' (log)' if logarithmic else ''))
         axes.grid(True, axis='y', which='both', alpha=0.3)
     figure.suptitle('finished flights; whiskers at p1 and p99')
     figure.tight_layout()
