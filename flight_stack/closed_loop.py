@@ -71,13 +71,14 @@ class ClosedLoop:
 
     ``reference(t)`` gives the reference at sim time t [s]; ``observe(t, state)`` returns
     (state the controller reads, observation) for a measured state (default: the state itself).
-    ``substeps`` physics steps are integrated per control step.
+    ``substeps`` physics steps are integrated per control step. With ``statistics`` the loop sums
+    each vehicle's tracking statistics as it goes (:attr:`statistics`; a batch keeps no record).
     """
 
     def __init__(self, controller: CascadedController, simulator: Simulator,
                  reference: Callable[[float], ReferenceSample], substeps: int, rules: FailureRules,
                  sensor_noise: SensorNoise | None = None, delay: TransportDelay | None = None,
-                 observe: Callable | None = None):
+                 observe: Callable | None = None, statistics: bool = False):
         self.controller = controller
         self.simulator = simulator
         self.reference = reference
@@ -87,7 +88,7 @@ class ClosedLoop:
         self.delay = delay
         self.observe = observe
         params = controller.params
-        self.statistics = StatisticsAccumulator(rules.settle_time, params.F_min, params.F_max)
+        self.statistics = StatisticsAccumulator(rules.settle_time, params.F_min, params.F_max) if statistics else None
         batch = isinstance(simulator.state[0], np.ndarray)
         shape = simulator.state[0].shape if batch else ()
         #: failure code per vehicle: -1 while flying, else an index into FAILURES
@@ -113,9 +114,9 @@ class ClosedLoop:
         out = self.controller.update(t, seen, reference)
         applied = out.forces if self.delay is None else self.delay(out.forces)
         sim.set_forces(applied)
-        flying = self.flying
-        self.statistics.add(t, truth[:3], truth[PSI], reference.position, reference.yaw, out.forces,
-                            out.controls, flying)
+        if self.statistics is not None:
+            self.statistics.add(t, truth[:3], truth[PSI], reference.position, reference.yaw, out.forces,
+                                out.controls, self.flying)
         sim.advance(self.substeps)
         self._check(sim.time, truth, reference)
         return LoopStep(t, truth, seen, observation, reference, out, applied)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
@@ -50,7 +50,6 @@ class FlightResult:
     steps: int
     failure: str | None = None         #: None, or why the flight ended early (one of closed_loop.FAILURES)
     failure_time_s: float | None = None
-    statistics: object = field(default=None, repr=False)   #: the loop's TrackingStatistics
 
 
 def published_path(trajectory, setpoint_rate: float) -> SetpointPath:
@@ -133,4 +132,4 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
             print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
     failure = None if loop.flying else FAILURES[loop.failure]
     return FlightResult(recorder.record(), time.perf_counter() - started, len(recorder.rows), failure,
-                        None if loop.flying else float(loop.failure_time), loop.statistics.statistics())
+                        None if loop.flying else float(loop.failure_time))

@@ -92,7 +92,7 @@ def fly_batch(job: BatchJob) -> list[dict]:
     simulator = Simulator(model, setup.physics_dt, start, motor_lag=perturbations.motor_lag, wind=perturbations.wind)
     setpoints = setpoint_path(published_path(setup.trajectory, 50.0))
     loop = ClosedLoop(controller, simulator, setpoints.sample, setup.substeps, setup.rules(spec),
-                      sensor_noise=perturbations.sensor_noise, delay=perturbations.delay)
+                      sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, statistics=True)
     with np.errstate(all='ignore'):      # a failing vehicle may overflow before it is frozen
         for _ in range(setup.steps(spec)):
             loop.step()
