@@ -1,7 +1,9 @@
 """The ROS contract of the stack: topic names, message types, QoS and frame ids, defined once.
 
 Names are relative to the vehicle namespace (``/quad/odom`` for namespace ``quad``), except
-``/clock``. QoS is described as plain data here (no rclpy import); the node modules turn it into
+``/clock`` and ``/tf``: one of each per ROS graph, shared by every vehicle of a fleet. Frame ids:
+the world frame ``odom`` is shared too, each vehicle's body frame is prefixed with its namespace
+(``uav1/base_link``, see :func:`base_frame`), as TF needs one name per frame. QoS is described as plain data here (no rclpy import); the node modules turn it into
 ``rclpy.qos.QoSProfile`` and the recorder writes it into the bag's channel metadata.
 
 Per control update the controller publishes, in this order: ``rotor_forces``, ``control/wrench``,
@@ -12,8 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-ODOM_FRAME = 'odom'           #: world frame, ENU (REP 103/105)
-BASE_FRAME = 'base_link'      #: body frame, FLU
+ODOM_FRAME = 'odom'           #: world frame, ENU (REP 103/105), shared by every vehicle
+BASE_FRAME = 'base_link'      #: body frame, FLU; a vehicle's is prefixed with its namespace: base_frame()
 DEFAULT_NAMESPACE = 'quad'
 
 
@@ -38,6 +40,9 @@ class TopicSpec:
 
 LOCKSTEP = QosSpec('reliable', 'volatile', 1000)   # history for a slow reader (a recorder) to catch up on
 LATCHED = QosSpec('reliable', 'transient_local', 1)
+#: what tf2 uses for /tf: tf2_ros' DynamicBroadcasterQoS (tf2_ros/qos.hpp) and the Python
+#: TransformBroadcaster's default, QoSProfile(depth=100): reliable, volatile, keep last 100
+TF_QOS = QosSpec('reliable', 'volatile', 100)
 
 ODOM = TopicSpec('odom', 'nav_msgs/msg/Odometry', LOCKSTEP, 'quad_sim -> controller, tools')
 ROTOR_FORCES = TopicSpec('rotor_forces', 'std_msgs/msg/Float64MultiArray', LOCKSTEP, 'controller -> quad_sim')
@@ -50,12 +55,16 @@ CONTROL_REFERENCE = TopicSpec('control/reference', 'geometry_msgs/msg/PoseStampe
 CONTROL_DIAGNOSTICS = TopicSpec('control/diagnostics', 'std_msgs/msg/Float64MultiArray', LOCKSTEP,
                                 'controller -> tools: S, NN and fuzzy terms per subsystem')
 CLOCK = TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', QosSpec('reliable', 'volatile', 10), 'quad_sim -> all')
+TF = TopicSpec('/tf', 'tf2_msgs/msg/TFMessage', TF_QOS,
+               'quad_sim -> tools: odom -> <namespace>/base_link of every vehicle, per odometry step')
 
 ALL_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, GOAL_POSE, CONTROL_WRENCH,
-              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK)
+              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, TF)
 #: what a flight bag records by default
 RECORDED_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, CONTROL_WRENCH, CONTROL_REFERENCE,
-                   CONTROL_DIAGNOSTICS, CLOCK)
+                   CONTROL_DIAGNOSTICS, CLOCK, TF)
+#: the simulator's topics (the others are the controller's, the trajectory's and the tools')
+SIMULATOR_TOPICS = (ODOM, CLOCK, TF)
 
 
 def resolve(topic: TopicSpec, namespace: str) -> str:
@@ -64,3 +73,20 @@ def resolve(topic: TopicSpec, namespace: str) -> str:
         return topic.name
     namespace = namespace.strip('/')
     return f'/{namespace}/{topic.name}' if namespace else f'/{topic.name}'
+
+
+def resolve_all(topics, namespaces) -> list[tuple[str, TopicSpec]]:
+    """(absolute name, topic) of every topic in every namespace, each name once (``/clock`` and ``/tf``
+    once for the whole fleet), in the order of ``namespaces`` then ``topics``."""
+    names: dict[str, TopicSpec] = {}
+    for namespace in namespaces:
+        for topic in topics:
+            names.setdefault(resolve(topic, namespace), topic)
+    return list(names.items())
+
+
+def base_frame(namespace: str) -> str:
+    """Body frame id of the vehicle in ``namespace``: ``uav1/base_link`` for ``/uav1``, ``base_link`` in the
+    root namespace (TF frame ids carry no leading '/')."""
+    namespace = namespace.strip('/')
+    return f'{namespace}/{BASE_FRAME}' if namespace else BASE_FRAME
