@@ -9,6 +9,7 @@ The default (auto) is ros when rclpy can be imported, else embedded.
 Examples:
   python3 run_stack.py                                   # the paper's flight, NNIT2FSMC
   python3 run_stack.py --controller smc-sign --no-disturbances --out out/sign
+  python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
 Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
   python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
@@ -27,6 +28,7 @@ from pathlib import Path
 
 import flight_stack  # noqa: F401  (puts the three ROS package folders on the path)
 from flight_stack.embedded import fly_embedded
+from flight_stack.fleet import MAX_VEHICLES, fleet_layout, report_fleet
 from flight_stack.ros_backend import RosFlightConfig, fly_ros
 from flight_stack.summary import build_summary, format_summary, write_summary
 from nnit2fsmc_controller.factory import CONTROLLERS, control_period, load_gains
@@ -34,7 +36,7 @@ from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
 from quad_msgs_bridge.bag.metadata import qos_overrides_main
 from quad_msgs_bridge.bag.recover import recover_main
 from quad_msgs_bridge.bag.timing import message_timing
-from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS
+from quad_msgs_bridge.contract import RECORDED_TOPICS
 from quad_msgs_bridge.bag.flight_bag import FlightBag, select_topics
 from quad_msgs_bridge.review.flight_from_bag import read_flight
 from quad_msgs_bridge.bag.mcap_file import BagWriteError
@@ -60,7 +62,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--max-error', type=float, default=1.0,
                         help='the flight fails if the position error after settling exceeds this [m]')
     parser.add_argument('--quiet', action='store_true', help='no progress lines')
-    parser.add_argument('--namespace', default=DEFAULT_NAMESPACE, help='ROS backend: namespace of the vehicle')
+    parser.add_argument('--namespace', default=None,
+                        help='ROS backend: namespace of the vehicle (default quad), or of a fleet\'s vehicles '
+                             '(default: the root namespace)')
+    parser.add_argument('--vehicles', type=int, default=1, metavar='N',
+                        help='ROS backend: fly N vehicles on one sim clock, uav1..uavN, each its own copy of the '
+                             'scenario shifted 3 m along y from the previous one')
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                         help='ROS backend: lockstep (deterministic) or realtime simulation')
     parser.add_argument('--speed-factor', type=float, default=1.0, help='ROS backend, realtime: sim s per wall s')
@@ -106,13 +113,15 @@ def choose_backend(requested: str) -> str:
     return 'ros'
 
 
-def fly_on_ros(args, trajectory, duration: float, disturbances: bool, physics_rate: float, gains: dict,
-               settle_time: float, topics, bag_path: Path):
-    """Fly with every node in its own process; (record, wall time, summary extras) read from the bag, or an exit code."""
+def fly_on_ros(args, duration: float, disturbances: bool, physics_rate: float, gains: dict, settle_time: float,
+               topics, bag_path: Path):
+    """Fly with every node in its own process; ([(namespace, record, summary extras) per vehicle], wall time),
+    read from the bag, or an exit code."""
+    vehicles = fleet_layout(args.vehicles, args.namespace)
     result = fly_ros(RosFlightConfig(
-        namespace=args.namespace, controller=args.controller, scenario=args.scenario, duration=duration,
+        vehicles=vehicles, controller=args.controller, scenario=args.scenario, duration=duration,
         disturbances=disturbances, seed=args.seed, physics_rate=physics_rate,
-        control_rate=1.0 / control_period(gains), initial_state=trajectory.initial_state, bag=bag_path,
+        control_rate=1.0 / control_period(gains), bag=bag_path,
         topics=[t.name for t in topics], mode=args.mode, speed_factor=args.speed_factor,
         extra_odom_subscribers=args.extra_subscribers,
         vehicle_file=args.vehicle, gains_file=args.gains, settle_time=settle_time, quiet=args.quiet))
@@ -120,15 +129,20 @@ def fly_on_ros(args, trajectory, duration: float, disturbances: bool, physics_ra
         print(f'error: the flight failed: {result.failed_node} (exit codes {result.exit_codes}); '
               f'the bag is closed: {bag_path}', file=sys.stderr)
         return 130 if result.failed_node == 'interrupted' else 1
+    flights = []
     try:
-        flight = read_flight(bag_path, namespace=args.namespace, vehicle_file=args.vehicle, settle_time=settle_time)
-        timing = message_timing(bag_path, args.namespace)
+        for vehicle in vehicles:
+            flight = read_flight(bag_path, namespace=vehicle.namespace, vehicle_file=args.vehicle,
+                                 settle_time=settle_time)
+            timing = message_timing(bag_path, vehicle.namespace)
+            flights.append((vehicle.namespace, flight.record, {
+                'offset_m': list(vehicle.offset),
+                'ros': {'namespace': vehicle.namespace, 'mode': args.mode,
+                        'simulator': result.sim_report.split('] ')[-1], 'timing': timing}}))
     except ValueError as error:
         print(f'error: cannot summarise the flight from {bag_path}: {error}', file=sys.stderr)
         return 1
-    return flight.record, result.wall_time_s, {'ros': {'namespace': args.namespace, 'mode': args.mode,
-                                                       'simulator': result.sim_report.split('] ')[-1],
-                                                       'timing': timing}}
+    return flights, result.wall_time_s
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -151,6 +165,7 @@ def main(argv: list[str] | None = None) -> int:
         physics_rate = check_number('--physics-rate', args.physics_rate, 0.0, low_inclusive=False)
         settle_time = check_number('--settle-time', args.settle_time, 0.0)
         check_number('--extra-subscribers', args.extra_subscribers, 0.0, 100.0)
+        check_number('--vehicles', args.vehicles, 1.0, MAX_VEHICLES)
         topics = select_topics(args.topics)
         if duration <= settle_time:
             raise ParameterError(f'--duration: {duration:g} s leaves nothing after the settling window '
@@ -159,18 +174,29 @@ def main(argv: list[str] | None = None) -> int:
         print(f'error: {error}', file=sys.stderr)
         return 2
     backend = choose_backend(args.backend)
+    if backend == 'embedded' and args.vehicles > 1:
+        print('error: --vehicles: a fleet flies on the ROS backend (--backend ros)', file=sys.stderr)
+        return 2
     out_dir = args.out or Path('out') / f'{args.scenario}-{args.controller}'
     bag_path = None if args.no_bag else args.bag or out_dir / 'bag'
     print(f'flying {args.controller} on "{args.scenario}" for {duration:g} s '
-          f'(disturbances {"on" if disturbances.enabled else "off"}), {backend} backend')
+          f'(disturbances {"on" if disturbances.enabled else "off"}), {backend} backend'
+          + (f', {args.vehicles} vehicles' if args.vehicles > 1 else ''))
+    run = dict(backend=backend, controller=args.controller, scenario=args.scenario, seed=args.seed,
+               settle_time=settle_time, params=params, disturbances=disturbances, gains=gains,
+               physics_rate=physics_rate, max_error=args.max_error)
     extra = {}
     if backend == 'ros':
         with tempfile.TemporaryDirectory(prefix='nnit2fsmc-') as scratch:
-            flown = fly_on_ros(args, trajectory, duration, disturbances.enabled, physics_rate, gains,
-                               settle_time, topics, bag_path or Path(scratch) / 'bag')
+            flown = fly_on_ros(args, duration, disturbances.enabled, physics_rate, gains, settle_time, topics,
+                               bag_path or Path(scratch) / 'bag')
         if isinstance(flown, int):
             return flown
-        record, wall_time_s, extra = flown
+        flights, wall_time_s = flown
+        if len(flights) > 1:
+            return report_fleet({name: {**build_summary(record, wall_time_s=wall_time_s, **run), **extra}
+                                 for name, record, extra in flights}, out_dir, bag_path)
+        [(_, record, extra)] = flights
     else:
         try:
             with stop_signals() as stop:
@@ -188,10 +214,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f'error: {error}', file=sys.stderr)
             return 1
         record, wall_time_s = result.record, result.wall_time_s
-    summary = build_summary(record, backend=backend, controller=args.controller, scenario=args.scenario,
-                            seed=args.seed, settle_time=settle_time, params=params, disturbances=disturbances,
-                            gains=gains, physics_rate=physics_rate, wall_time_s=wall_time_s,
-                            max_error=args.max_error)
+    summary = build_summary(record, wall_time_s=wall_time_s, **run)
     summary.update(extra)
     path = write_summary(summary, out_dir)
     print(format_summary(summary))

@@ -3,8 +3,9 @@
 Names are relative to the vehicle namespace (``/quad/odom`` for namespace ``quad``), except
 ``/clock`` and ``/tf``: one of each per ROS graph, shared by every vehicle of a fleet. Frame ids:
 the world frame ``odom`` is shared too, each vehicle's body frame is prefixed with its namespace
-(``uav1/base_link``, see :func:`base_frame`), as TF needs one name per frame. QoS is described as plain data here (no rclpy import); the node modules turn it into
-``rclpy.qos.QoSProfile`` and the recorder writes it into the bag's channel metadata.
+(``uav1/base_link``, see :func:`base_frame`), as TF needs one name per frame. QoS is described as
+plain data here (no rclpy import); the node modules turn it into ``rclpy.qos.QoSProfile`` and the
+recorder writes it into the bag's channel metadata.
 
 Per control update the controller publishes, in this order: ``rotor_forces``, ``control/wrench``,
 ``control/reference`` and ``control/diagnostics``. The stamped ones carry the stamp of the
@@ -12,11 +13,16 @@ odometry they answer; unstamped ones pair with them by order.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from typing import Sequence
+
+from quad_msgs_bridge.vehicle_params import ParameterError
 
 ODOM_FRAME = 'odom'           #: world frame, ENU (REP 103/105), shared by every vehicle
 BASE_FRAME = 'base_link'      #: body frame, FLU; a vehicle's is prefixed with its namespace: base_frame()
 DEFAULT_NAMESPACE = 'quad'
+_NAMESPACE = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')   #: ROS 2 name tokens
 
 
 @dataclass(frozen=True)
@@ -90,3 +96,23 @@ def base_frame(namespace: str) -> str:
     root namespace (TF frame ids carry no leading '/')."""
     namespace = namespace.strip('/')
     return f'{namespace}/{BASE_FRAME}' if namespace else BASE_FRAME
+
+
+def vehicle_namespaces(node_namespace: str, names: Sequence[str]) -> list[str]:
+    """Absolute namespaces of the vehicles ``names``, each relative to ``node_namespace`` ('' is the node's own
+    namespace, a leading '/' makes a name absolute); ParameterError for an invalid, repeated or missing name."""
+    if not names:
+        raise ParameterError('parameter vehicles: at least one vehicle is needed')
+    base = node_namespace.strip('/')
+    namespaces = []
+    for name in names:
+        relative = name.strip('/')
+        if relative and not _NAMESPACE.fullmatch(relative):
+            raise ParameterError(f'parameter vehicles: {name!r} is not a valid namespace (names of letters, digits '
+                                 'and underscores, not starting with a digit, separated by /)')
+        parts = [relative] if name.startswith('/') else [base, relative]
+        namespaces.append('/' + '/'.join(p for p in parts if p))
+    repeated = sorted({ns for ns in namespaces if namespaces.count(ns) > 1})
+    if repeated:
+        raise ParameterError(f'parameter vehicles: {repeated[0]} is given more than once')
+    return namespaces
