@@ -53,6 +53,7 @@ class RosFlightConfig:
     quiet: bool = False
     extra_odom_subscribers: int = 0   #: further odom subscribers the simulator waits for (e.g. a ros2 bag record)
     record: bool = True       #: False: no recorder process (for timing the bare three-node loop)
+    publish_tf: bool = True   #: the simulator broadcasts every vehicle's odom -> <ns>/base_link on /tf
 
 
 @dataclass
@@ -112,7 +113,7 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
           'wait_for_subscribers': (2 if config.record else 1) + config.extra_odom_subscribers,
           # an outside recorder subscribes to odom among its other topics: give those time to match too
           'start_delay': EXTRA_SUBSCRIBER_DELAY if config.extra_odom_subscribers else 0.0,
-          'initial_state': initial_states, **fleet, **vehicle}))
+          'initial_state': initial_states, 'publish_tf': config.publish_tf, **fleet, **vehicle}))
     processes: list[NodeProcess] = []
     started = time.monotonic()
     failed = None
