@@ -140,40 +140,47 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
         assert ros_payloads[topic] == messages, f'{topic}: the ROS flight sent other bytes than the embedded one'
 
 
-def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
+def kill_a_controller_mid_flight(arguments: list[str], namespace: str, bag) -> tuple[int, str]:
+    """Start ``run_stack.py --backend ros ARGUMENTS --bag BAG --duration 60``, SIGKILL the controller of the vehicle in
+    ``namespace`` 3 s into the flight; (exit code, output) of the entry script. Asserts no node is left running."""
     import os
-    import signal
-    import time
     from flight_stack.processes import source_tree_environment
-    from quad_msgs_bridge.review.flight_from_bag import read_flight
 
-    bag = tmp_path / 'bag'
     stack = subprocess.Popen(
-        [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', '--namespace', 'killed', '--duration', '60',
-         '--out', str(tmp_path), '--bag', str(bag), '--quiet'],
+        [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', *arguments, '--duration', '60',
+         '--out', str(bag.parent), '--bag', str(bag), '--quiet'],
         env=source_tree_environment(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 60.0
         controller_pid = None
         while controller_pid is None and time.monotonic() < deadline:
-            found = subprocess.run(['pgrep', '-f', 'controller_node.*__ns:=/killed'], capture_output=True, text=True)
+            found = subprocess.run(['pgrep', '-P', str(stack.pid), '-f', f'controller_node.*__ns:=/{namespace}( |$)'],
+                                   capture_output=True, text=True)
             pids = found.stdout.split()
             if pids and (bag / 'metadata.yaml').exists():
                 time.sleep(3.0)          # well into the flight
                 controller_pid = int(pids[0])
             else:
                 time.sleep(0.2)
-        assert controller_pid is not None, 'the controller never started'
+        assert controller_pid is not None, f'the controller of {namespace} never started'
         os.kill(controller_pid, signal.SIGKILL)
         output, _ = stack.communicate(timeout=120)
     finally:
         if stack.poll() is None:
             stack.kill()
-    assert stack.returncode not in (0, None), output
-    assert 'controller' in output and 'failed' in output
-    leftovers = subprocess.run(['pgrep', '-f', '__ns:=/killed'], capture_output=True, text=True).stdout.split()
+    root = namespace.split('/')[0]
+    leftovers = subprocess.run(['pgrep', '-f', f'__ns:=/{root}'], capture_output=True, text=True).stdout.split()
     assert leftovers == [], 'nodes left running after the entry script exited'
-    flight = read_flight(bag)   # the recorder finalized what it had: readable, a prefix of the flight
+    return stack.returncode, output
+
+
+def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
+
+    code, output = kill_a_controller_mid_flight(['--namespace', 'killed'], 'killed', tmp_path / 'bag')
+    assert code == 1, output
+    assert 'error: the flight failed: controller (' in output
+    flight = read_flight(tmp_path / 'bag')   # the recorder finalized what it had: readable, a prefix of the flight
     assert 1.0 < flight.record.time[-1] < 59.0
 
 
@@ -233,40 +240,14 @@ def test_a_lockstep_fleet_flies_each_vehicle_exactly_as_it_flies_alone(tmp_path)
 
 
 def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_readable(tmp_path):
-    import os
-    import time
-    from flight_stack.processes import source_tree_environment
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
-    bag = tmp_path / 'bag'
-    stack = subprocess.Popen(
-        [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', '--vehicles', '2', '--namespace', 'deadfleet',
-         '--duration', '60', '--out', str(tmp_path), '--bag', str(bag), '--quiet'],
-        env=source_tree_environment(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        deadline = time.monotonic() + 60.0
-        controller_pid = None
-        while controller_pid is None and time.monotonic() < deadline:
-            found = subprocess.run(['pgrep', '-P', str(stack.pid), '-f', 'controller_node.*__ns:=/deadfleet/uav2'],
-                                   capture_output=True, text=True)
-            pids = found.stdout.split()
-            if pids and (bag / 'metadata.yaml').exists():
-                time.sleep(3.0)          # well into the flight
-                controller_pid = int(pids[0])
-            else:
-                time.sleep(0.2)
-        assert controller_pid is not None, 'the controller of uav2 never started'
-        os.kill(controller_pid, signal.SIGKILL)
-        output, _ = stack.communicate(timeout=120)
-    finally:
-        if stack.poll() is None:
-            stack.kill()
-    assert stack.returncode == 1, output
-    assert 'error: the flight failed: controller deadfleet/uav2' in output
-    leftovers = subprocess.run(['pgrep', '-f', '__ns:=/deadfleet'], capture_output=True, text=True).stdout.split()
-    assert leftovers == [], 'nodes left running after the entry script exited'
+    code, output = kill_a_controller_mid_flight(['--vehicles', '2', '--namespace', 'deadfleet'], 'deadfleet/uav2',
+                                                tmp_path / 'bag')
+    assert code == 1, output
+    assert 'error: the flight failed: controller deadfleet/uav2 (' in output
     for name in ('uav1', 'uav2'):   # the recorder finalized what it had: each vehicle a readable prefix of its flight
-        flight = read_flight(bag, namespace=f'deadfleet/{name}')
+        flight = read_flight(tmp_path / 'bag', namespace=f'deadfleet/{name}')
         assert 1.0 < flight.record.time[-1] < 59.0
 
 

@@ -1,12 +1,17 @@
-"""The fleet of run_stack.py --vehicles N: names, offset copies of the scenario, where the shared nodes run,
-the per-vehicle summary, and the refusals (without ROS)."""
+"""The fleet of run_stack.py --vehicles N without ROS: names, offset copies of the scenario, where the shared
+nodes run, the per-vehicle summary, the refusals, and the bag and rosbag2 QoS overrides of several vehicles."""
 import subprocess
 import sys
 
 import pytest
+import yaml
+from rosbags.highlevel import AnyReader
 
 from flight_stack.fleet import (FLEET_SPACING_M, FleetVehicle, fleet_home, fleet_layout, fleet_summary,
                                 format_fleet_summary)
+from quad_msgs_bridge.bag.metadata import rosbag2_qos_overrides
+from quad_msgs_bridge.bag.writer import BagWriter
+from quad_msgs_bridge.contract import RECORDED_TOPICS
 from ros_support import ROOT
 
 
@@ -60,3 +65,25 @@ def test_run_stack_refuses_a_bad_fleet_before_flying(arguments, message, tmp_pat
     assert done.returncode == 2
     assert f'error: {message}' in done.stderr
     assert 'Traceback' not in done.stderr and not (tmp_path / 'bag').exists()
+
+
+PER_VEHICLE = ['odom', 'rotor_forces', 'setpoints', 'reference_path', 'control/wrench', 'control/reference',
+               'control/diagnostics']
+
+
+def test_a_fleet_bag_has_each_vehicles_topics_and_one_clock_and_tf(tmp_path):
+    with BagWriter(tmp_path / 'bag', RECORDED_TOPICS, ['uav1', '/team/uav2']):
+        pass
+    with AnyReader([tmp_path / 'bag']) as reader:
+        topics = sorted(c.topic for c in reader.connections)
+    assert topics == sorted([f'/uav1/{name}' for name in PER_VEHICLE] + [f'/team/uav2/{name}' for name in PER_VEHICLE]
+                            + ['/clock', '/tf'])
+
+
+def test_rosbag2_qos_overrides_cover_every_vehicle():
+    overrides = yaml.safe_load(rosbag2_qos_overrides(['uav1', 'uav2']))
+    assert sorted(overrides) == sorted([f'/uav{k}/{name}' for k in (1, 2) for name in PER_VEHICLE]
+                                       + ['/clock', '/tf'])
+    assert overrides['/uav2/odom']['depth'] == 1000
+    assert (overrides['/tf']['reliability'], overrides['/tf']['durability'], overrides['/tf']['depth']) == \
+        ('reliable', 'volatile', 100)
