@@ -10,8 +10,8 @@ time and the real message latencies.
 One recorder records a fleet: the contract topics of every vehicle of ``vehicles`` (namespaces
 relative to the node's, by default its own), ``/clock`` and ``/tf`` once. Per-step topics published
 by the controllers must be discovered before ``odom`` is subscribed: a lockstep simulator that waits
-for the recorder's ``odom`` subscriptions then starts only when nothing of the flight can be missed. SIGINT/SIGTERM stop it cleanly: everything already received
-is drained and the bag is finalized.
+for the recorder's ``odom`` subscriptions then starts only when nothing of the flight can be missed.
+SIGINT/SIGTERM stop it cleanly: everything already received is drained and the bag is finalized.
 """
 from __future__ import annotations
 
