@@ -140,30 +140,28 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
         assert ros_payloads[topic] == messages, f'{topic}: the ROS flight sent other bytes than the embedded one'
 
 
-def kill_a_controller_mid_flight(arguments: list[str], namespace: str, bag) -> tuple[int, str]:
+def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str, bag) -> tuple[int, str]:
     """Start ``run_stack.py --backend ros ARGUMENTS --bag BAG --duration 60``, SIGKILL the controller of the vehicle in
-    ``namespace`` 3 s into the flight; (exit code, output) of the entry script. Asserts no node is left running."""
+    ``namespace`` once /clock says 3 s of sim time are flown; (exit code, output) of the entry script. Asserts that no
+    node is left running."""
     import os
     from flight_stack.processes import source_tree_environment
+    from quad_msgs_bridge.contract import CLOCK
 
+    sim_time = [0.0]
+    ros_node.create_subscription(rclpy_kit()[CLOCK.type], CLOCK.name,
+                                 lambda msg: sim_time.__setitem__(0, msg.clock.sec + 1e-9 * msg.clock.nanosec),
+                                 qos_profile(CLOCK.qos))
     stack = subprocess.Popen(
         [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', *arguments, '--duration', '60',
          '--out', str(bag.parent), '--bag', str(bag), '--quiet'],
         env=source_tree_environment(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        deadline = time.monotonic() + 60.0
-        controller_pid = None
-        while controller_pid is None and time.monotonic() < deadline:
-            found = subprocess.run(['pgrep', '-P', str(stack.pid), '-f', f'controller_node.*__ns:=/{namespace}( |$)'],
-                                   capture_output=True, text=True)
-            pids = found.stdout.split()
-            if pids and (bag / 'metadata.yaml').exists():
-                time.sleep(3.0)          # well into the flight
-                controller_pid = int(pids[0])
-            else:
-                time.sleep(0.2)
-        assert controller_pid is not None, f'the controller of {namespace} never started'
-        os.kill(controller_pid, signal.SIGKILL)
+        assert spin_until(ros_node, lambda: sim_time[0] >= 3.0, timeout=120.0), 'the flight never reached 3 s'
+        found = subprocess.run(['pgrep', '-P', str(stack.pid), '-f', f'controller_node.*__ns:=/{namespace}( |$)'],
+                               capture_output=True, text=True)
+        [controller_pid] = found.stdout.split()
+        os.kill(int(controller_pid), signal.SIGKILL)
         output, _ = stack.communicate(timeout=120)
     finally:
         if stack.poll() is None:
@@ -174,14 +172,14 @@ def kill_a_controller_mid_flight(arguments: list[str], namespace: str, bag) -> t
     return stack.returncode, output
 
 
-def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
+def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(ros_node, tmp_path):
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
-    code, output = kill_a_controller_mid_flight(['--namespace', 'killed'], 'killed', tmp_path / 'bag')
+    code, output = kill_a_controller_mid_flight(ros_node, ['--namespace', 'killed'], 'killed', tmp_path / 'bag')
     assert code == 1, output
     assert 'error: the flight failed: controller (' in output
     flight = read_flight(tmp_path / 'bag')   # the recorder finalized what it had: readable, a prefix of the flight
-    assert 1.0 < flight.record.time[-1] < 59.0
+    assert 3.0 <= flight.record.time[-1] < 59.0
 
 
 def odometry_values(sample) -> list[float]:
@@ -239,16 +237,16 @@ def test_a_lockstep_fleet_flies_each_vehicle_exactly_as_it_flies_alone(tmp_path)
     assert [round(t.y - last[0].y, 6) for t in last] == [0.0, 3.0, 6.0]   # three copies, 3 m apart along y
 
 
-def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_readable(tmp_path):
+def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_readable(ros_node, tmp_path):
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
-    code, output = kill_a_controller_mid_flight(['--vehicles', '2', '--namespace', 'deadfleet'], 'deadfleet/uav2',
-                                                tmp_path / 'bag')
+    code, output = kill_a_controller_mid_flight(ros_node, ['--vehicles', '2', '--namespace', 'deadfleet'],
+                                                'deadfleet/uav2', tmp_path / 'bag')
     assert code == 1, output
     assert 'error: the flight failed: controller deadfleet/uav2 (' in output
     for name in ('uav1', 'uav2'):   # the recorder finalized what it had: each vehicle a readable prefix of its flight
         flight = read_flight(tmp_path / 'bag', namespace=f'deadfleet/{name}')
-        assert 1.0 < flight.record.time[-1] < 59.0
+        assert 3.0 <= flight.record.time[-1] < 59.0
 
 
 def test_without_tf2_msgs_the_simulator_says_so_once_and_flies_without_tf(ros_node, capfd):
