@@ -26,7 +26,7 @@ import yaml
 from nnit2fsmc_controller.trajectory import make_scenario
 
 from .fleet import FleetVehicle, fleet_home
-from .processes import NodeProcess, node_command, source_tree_environment, wait_for_exit
+from .processes import NodeProcess, node_command, source_tree_environment, stop_all, wait_for_exit
 
 
 EXTRA_SUBSCRIBER_DELAY = 1.0   #: [s, wall] the simulator waits once extra odom subscribers are there
@@ -133,9 +133,7 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     except (KeyboardInterrupt, TimeoutError) as stop:
         failed = 'interrupted' if isinstance(stop, KeyboardInterrupt) else f'timeout ({stop})'
     finally:
-        codes = {}
-        for proc in reversed(processes[1:]):
-            codes[proc.name] = proc.stop()
+        codes = stop_all(processes[1:])
         if processes:
             codes[processes[0].name] = processes[0].stop(grace=30.0)
     wall = time.monotonic() - started
