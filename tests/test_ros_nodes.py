@@ -24,6 +24,7 @@ if HAVE_RCLPY:
 
 from quad_msgs_bridge.bag.reader import mcap_file
 from flight_stack.fleet import FleetVehicle, fleet_layout
+from flight_stack.processes import stop_all
 from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
                                        REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, TF, resolve)
 from quad_msgs_bridge.conversions import odometry_from_msg, odometry_msg, pose_stamped_msg, rclpy_kit, rotor_forces_msg
@@ -38,10 +39,6 @@ def ros_node():
     yield node
     node.destroy_node()
     rclpy.shutdown()
-
-
-def stop_all(processes):
-    return {p.name: p.stop() for p in reversed(processes)}
 
 
 def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
@@ -247,6 +244,64 @@ def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_read
     for name in ('uav1', 'uav2'):   # the recorder finalized what it had: each vehicle a readable prefix of its flight
         flight = read_flight(tmp_path / 'bag', namespace=f'deadfleet/{name}')
         assert 3.0 <= flight.record.time[-1] < 59.0
+
+
+def tf2_ros_available() -> bool:
+    try:
+        import tf2_ros  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(not tf2_ros_available(), reason=SKIP_REASON if not HAVE_RCLPY else
+                    'tf2_ros (Python) is not installed in the sourced ROS 2')
+def test_tf2_sees_every_vehicle_of_a_fleet_at_its_odometry_pose(ros_node):
+    """A tf2 buffer fed by a TransformListener: odom -> <ns>/base_link at an odometry stamp is that odometry's
+    pose, for each vehicle of a fleet, and one vehicle's frame is found relative to the other's."""
+    from rclpy.time import Time
+    from tf2_ros import Buffer, TransformListener
+
+    kit = rclpy_kit()
+    buffer = Buffer()
+    listener = TransformListener(buffer, ros_node)   # noqa: F841 (it feeds the buffer while the node spins)
+    odometry = {'uav1': [], 'uav2': []}
+    for name, received in odometry.items():
+        ros_node.create_subscription(kit[ODOM.type], f'/tfcheck/{name}/odom', received.append, qos_profile(ODOM.qos))
+    processes = []
+    for name, offset in (('uav1', [0.0, 0.0, 0.0]), ('uav2', [0.0, 3.0, 0.0])):
+        processes += [
+            node_process(f'trajectory {name}', 'nnit2fsmc_controller.trajectory_node', f'tfcheck/{name}',
+                         {'scenario': 'hover', 'start_time': 0.0, 'offset': offset}),
+            node_process(f'controller {name}', 'nnit2fsmc_controller.controller_node', f'tfcheck/{name}', {})]
+    start = Hover().initial_state
+    processes.append(node_process('sim', 'quad_sim.sim_node', 'tfcheck',
+                                  {'vehicles': ['uav1', 'uav2'], 'duration': 3.0, 'wait_for_subscribers': 2,
+                                   'initial_state': start + [start[0], start[1] + 3.0] + start[2:]}))
+    try:
+        assert spin_until(ros_node, lambda: min(map(len, odometry.values())) >= 1000, timeout=60.0)
+        found = {}
+        for name, received in odometry.items():
+            msg = received[900]     # 0.9 s into the flight, well after the listener's first transform
+            transform = buffer.lookup_transform('odom', f'tfcheck/{name}/base_link',
+                                                Time.from_msg(msg.header.stamp))
+            found[name] = (transform, msg)
+        between = buffer.lookup_transform('tfcheck/uav1/base_link', 'tfcheck/uav2/base_link',
+                                          Time.from_msg(odometry['uav1'][900].header.stamp))
+    finally:
+        codes = stop_all(processes)
+    assert all(code == 0 for code in codes.values()), codes
+    for name, (transform, msg) in found.items():
+        assert transform.header.stamp == msg.header.stamp and transform.child_frame_id == f'tfcheck/{name}/base_link'
+        t, r = transform.transform.translation, transform.transform.rotation
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        assert (t.x, t.y, t.z) == (p.x, p.y, p.z)
+        # the buffer stores the rotation normalized again (a last-bit difference); /tf itself carries the
+        # odometry's quaternion exactly (bag-level test)
+        assert (r.x, r.y, r.z, r.w) == pytest.approx((q.x, q.y, q.z, q.w), abs=1e-15)
+    assert found['uav1'][1].pose.pose.position.z > 0.3                  # flying: not the start pose
+    d = between.transform.translation
+    assert math.hypot(d.x, d.y, d.z) == pytest.approx(3.0, abs=0.05)    # two hovering copies 3 m apart
 
 
 def test_without_tf2_msgs_the_simulator_says_so_once_and_flies_without_tf(ros_node, capfd):
