@@ -7,10 +7,10 @@ Order: the recorder first (it records what really goes over the topics), then ea
 trajectory and controller, then the simulator. In lockstep the simulator waits for two subscribers
 of each vehicle's ``odom`` (its controller and the recorder) and the recorder only subscribes to
 ``odom`` once it has discovered every controller's publishers, so the bag holds every step. The
-flight ends when the simulator has reached the duration and exits; the others are then stopped with SIGINT (then SIGTERM, SIGKILL),
-the recorder last so that it drains what is still in flight and finalizes the bag. If any node dies
-first (named with its vehicle in a fleet: ``controller uav2``), the rest are stopped the same way
-and the flight is reported as failed.
+flight ends when the simulator has reached the duration and exits; the others are then stopped
+together with SIGINT (then SIGTERM, SIGKILL), the recorder last so that it drains what is still in
+flight and finalizes the bag. If any node dies first (named with its vehicle in a fleet:
+``controller uav2``), the rest are stopped the same way and the flight is reported as failed.
 
 The summary is computed from the bag: what was observed on the topics.
 """

@@ -3,8 +3,9 @@
 Per control step the bag gets what the ROS flight publishes, in the same order and with the same
 sim-time stamps: ``/clock``, ``odom`` and ``/tf`` (simulator: one TFMessage, ``odom`` ->
 ``<namespace>/base_link``), then ``rotor_forces``, ``control/wrench``, ``control/reference`` and
-``control/diagnostics`` (controller). The body frame is the namespaced one the nodes use. Every message of a step is logged
-at that step's odometry stamp [ns]; ``setpoints`` and ``reference_path`` once, at the path start.
+``control/diagnostics`` (controller). The body frame is the namespaced one the nodes use. Every
+message of a step is logged at that step's odometry stamp [ns]; ``setpoints`` and
+``reference_path`` once, at the path start.
 The run's vehicle parameters and settings go into the bag's custom data, so a review finds the arm
 length and the rotor limits without the vehicle file.
 """
