@@ -246,6 +246,40 @@ def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_read
         assert 3.0 <= flight.record.time[-1] < 59.0
 
 
+def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_only_the_silent_ones(ros_node):
+    """Two vehicles answered by hand: an answer of one alone does not advance sim time; after input_timeout the
+    silent vehicle's odometry (only its) is published again and it is named; its answer completes the step."""
+    kit = rclpy_kit()
+    odometry = {'a': [], 'b': []}
+    forces = {}
+    for name, received in odometry.items():
+        ros_node.create_subscription(kit[ODOM.type], f'/pairing/{name}/odom',
+                                     lambda msg, received=received: received.append(msg.header.stamp.nanosec),
+                                     qos_profile(ODOM.qos))
+        forces[name] = ros_node.create_publisher(kit[ROTOR_FORCES.type], f'/pairing/{name}/rotor_forces',
+                                                 qos_profile(ROTOR_FORCES.qos))
+    sim = node_process('sim', 'quad_sim.sim_node', 'pairing',
+                       {'vehicles': ['a', 'b'], 'initial_state': [0.0] * 24, 'input_timeout': 0.3})
+    hover = rotor_forces_msg(kit, [1.0] * 4)
+    try:
+        assert spin_until(ros_node, lambda: odometry['a'] and odometry['b'] and all(
+            publisher.get_subscription_count() for publisher in forces.values()), timeout=30.0)
+        forces['a'].publish(hover)
+        spin_until(ros_node, lambda: len(odometry['b']) > 1, timeout=1.0)     # past input_timeout: b repeated
+        after_timeout = {name: list(stamps) for name, stamps in odometry.items()}
+        forces['b'].publish(hover)
+        assert spin_until(ros_node, lambda: odometry['a'][-1] == 1_000_000 and odometry['b'][-1] == 1_000_000,
+                          timeout=10.0)
+    finally:
+        codes = stop_all([sim])
+    assert codes == {'sim': 0}
+    assert after_timeout['a'] == [0]                 # a answered: nothing new for it while b is silent
+    assert after_timeout['b'][:2] == [0, 0]          # b's pending odometry again, same stamp: sim time held
+    assert odometry['a'] == [0, 1_000_000] and odometry['b'][-1] == 1_000_000
+    log = '\n'.join(sim.lines)
+    assert 'b: no rotor_forces for 0.3 s at sim time 0.000 s' in log and 'a: no rotor_forces' not in log
+
+
 def tf2_ros_available() -> bool:
     try:
         import tf2_ros  # noqa: F401
