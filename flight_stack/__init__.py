@@ -5,7 +5,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE_DIRS = [ROOT / 'ros2_ws' / 'src' / name for name in ('quad_msgs_bridge', 'quad_sim', 'nnit2fsmc_controller')]
 
-# From a fresh clone the three package folders are importable without installing them.
+# From a fresh clone the three package folders are importable without installing them (installed with
+# pip, the folders do not exist and the packages come from site-packages).
 for _package_dir in PACKAGE_DIRS:
-    if str(_package_dir) not in sys.path:
+    if _package_dir.is_dir() and str(_package_dir) not in sys.path:
         sys.path.append(str(_package_dir))

@@ -3,24 +3,44 @@
 Per control step it performs the calls the ROS lockstep flight performs, in the same order: the
 simulator's state becomes an odometry sample stamped with sim time, the controller turns it back
 into a state and answers it with the reference for that same instant, the simulator takes the
-thrusts and integrates until the next odometry.
+thrusts and integrates until the next odometry. The stepping itself is the closed loop of
+:mod:`flight_stack.closed_loop`, the one a campaign batch runs; with ``perturbations`` the flight
+flies a perturbed true vehicle with sensor noise, delay, motor lag and wind.
 """
 from __future__ import annotations
 
+import math
 import sys
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Sequence
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
 from quad_msgs_bridge.bag.flight_bag import FlightBag
 from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
 from quad_msgs_bridge.reference import SetpointPath
-from quad_msgs_bridge.state import PSI, state_from_odometry
+from quad_msgs_bridge.state import PSI, odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.model import QuadrotorModel
+from quad_sim.perturbations.actuation import MotorLag, TransportDelay
+from quad_sim.perturbations.sensor_noise import SensorNoise
+from quad_sim.perturbations.wind import Wind
 from quad_sim.simulator import Simulator
 from nnit2fsmc_controller.factory import build_controller
+
+from .closed_loop import FAILURES, ClosedLoop, FailureRules
+
+
+@dataclass
+class Perturbations:
+    """What makes a flight differ from the nominal one (for one vehicle, or a batch: then arrays
+    and per-vehicle random streams). Left at None, a part is off."""
+
+    true_vehicle: VehicleParams | None = None   #: the vehicle the simulator flies (default: the nominal one)
+    sensor_noise: SensorNoise | None = None
+    delay: TransportDelay | None = None
+    motor_lag: MotorLag | None = None
+    wind: Wind | None = None
 
 
 @dataclass
@@ -28,6 +48,8 @@ class FlightResult:
     record: FlightRecord
     wall_time_s: float
     steps: int
+    failure: str | None = None         #: None, or why the flight ended early (one of closed_loop.FAILURES)
+    failure_time_s: float | None = None
 
 
 def published_path(trajectory, setpoint_rate: float) -> SetpointPath:
@@ -40,49 +62,74 @@ def setpoint_path(path: SetpointPath) -> SetpointPath:
     return setpoints_from_msg(setpoints_msg(rosbags_kit(), path))
 
 
+def physics_substeps(control_dt: float, physics_rate: float) -> int:
+    """Physics steps per control step; ValueError unless the physics rate is a whole multiple."""
+    physics_dt = 1.0 / physics_rate
+    substeps = round(control_dt / physics_dt)
+    if substeps < 1 or abs(substeps * physics_dt - control_dt) > 1e-12:
+        raise ValueError(f'physics rate {physics_rate} Hz is not a whole multiple of the control rate '
+                         f'{1.0 / control_dt} Hz')
+    return substeps
+
+
+def through_odometry(t: float, state: list):
+    """The state as the controller reads it from an odometry message of it, and that message's content."""
+    odometry = odometry_from_state(t, state)
+    return state_from_odometry(odometry), odometry
+
+
 def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, disturbances: Disturbances,
                  gains: dict, duration: float, physics_rate: float, setpoint_rate: float = 50.0,
                  progress: bool = False, bag: FlightBag | None = None,
-                 stop: Callable[[], bool] | None = None) -> FlightResult:
+                 stop: Callable[[], bool] | None = None, sinks: Sequence = (),
+                 perturbations: Perturbations | None = None,
+                 rules: FailureRules = FailureRules(settle_time=5.0, max_error=math.inf)) -> FlightResult:
     """Fly ``trajectory`` for ``duration`` [s] of sim time; one record row per control step.
 
-    With ``bag`` every step's contract messages are recorded too (the caller closes the bag).
-    ``stop`` is asked between two control steps: once it returns true the flight raises
-    KeyboardInterrupt, with every step so far complete in the bag.
+    ``params`` is the controller's nominal model, and the vehicle flown unless ``perturbations``
+    says otherwise. The record holds the true position; with sensor noise the bag's ``odom`` is
+    what the controller read. With ``bag`` every step's contract messages are recorded too (the
+    caller closes the bag). ``sinks`` get the same calls after the bag, in order:
+    ``record_setpoints(path)`` once, then ``record_step(...)`` per step (e.g. a ``pacing.Pacer``,
+    then a ``live_view.LiveView``). ``stop`` is asked between two control steps: once it returns
+    true the flight raises KeyboardInterrupt, with every step so far complete in the bag. A flight
+    that breaks one of ``rules`` ends there (``FlightResult.failure`` says why).
     """
+    perturbations = perturbations or Perturbations()
     controller = build_controller(controller_kind, params, gains)
     published = published_path(trajectory, setpoint_rate)
     setpoints = setpoint_path(published)
-    physics_dt = 1.0 / physics_rate
-    substeps = round(controller.dt / physics_dt)
-    if substeps < 1 or abs(substeps * physics_dt - controller.dt) > 1e-12:
-        raise ValueError(f'physics rate {physics_rate} Hz is not a whole multiple of the control rate '
-                         f'{1.0 / controller.dt} Hz')
-    simulator = Simulator(QuadrotorModel(params, disturbances), physics_dt, trajectory.initial_state)
+    substeps = physics_substeps(controller.dt, physics_rate)
+    model = QuadrotorModel(perturbations.true_vehicle or params, disturbances)
+    simulator = Simulator(model, 1.0 / physics_rate, trajectory.initial_state,
+                          motor_lag=perturbations.motor_lag, wind=perturbations.wind)
+    loop = ClosedLoop(controller, simulator, setpoints.sample, substeps, rules,
+                      sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, observe=through_odometry)
     recorder = FlightRecorder()
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     started = time.perf_counter()
-    if bag is not None:
-        bag.record_setpoints(published)
+    step_sinks = ([bag] if bag is not None else []) + list(sinks)
+    for sink in step_sinks:
+        sink.record_setpoints(published)
     for k in range(steps):
         if stop is not None and stop():
             raise KeyboardInterrupt(f'stopped after {k} control steps')
-        odometry = simulator.odometry()
-        t = odometry.stamp
-        state = state_from_odometry(odometry)
-        reference = setpoints.sample(t)
-        out = controller.update(t, state, reference)
-        simulator.set_forces(out.forces)
+        done = loop.step()
+        out, reference, truth = done.output, done.reference, done.truth
         axes = out.axes.values()
         surfaces, equivalent, corrective = ([a.surface for a in axes], [a.equivalent for a in axes],
                                             [a.corrective for a in axes])
-        recorder.append(t, odometry.position, state[PSI], reference.position, reference.yaw,
+        recorder.append(done.time, truth[:3], truth[PSI], reference.position, reference.yaw,
                         out.forces, out.controls, surfaces, equivalent, corrective)
-        if bag is not None:
-            bag.record_step(odometry, out.forces, out.controls, reference.position, reference.yaw,
-                            surfaces, equivalent, corrective)
-        simulator.advance(substeps)
+        truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
+        for sink in step_sinks:
+            sink.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
+                             surfaces, equivalent, corrective, truth=truth_odometry)
+        if not loop.flying:
+            break
         if progress and (k + 1) % report_every == 0:
             print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
-    return FlightResult(recorder.record(), time.perf_counter() - started, steps)
+    failure = None if loop.flying else FAILURES[loop.failure]
+    return FlightResult(recorder.record(), time.perf_counter() - started, len(recorder.rows), failure,
+                        None if loop.flying else float(loop.failure_time))

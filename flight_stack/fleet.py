@@ -9,13 +9,9 @@ apart along y, ``uav1`` on the scenario itself, each starting at rest under its 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Sequence
 
 from quad_msgs_bridge.contract import DEFAULT_NAMESPACE
-from quad_msgs_bridge.review.command import review_bags
-
-from .summary import write_summary
 
 FLEET_SPACING_M = 3.0   #: [m] between neighbouring vehicles, along y
 MAX_VEHICLES = 20       #: a sanity bound for --vehicles (each vehicle is two node processes)
@@ -84,23 +80,3 @@ def format_fleet_summary(fleet: dict) -> str:
     lines.append('  result: ' + ('OK' if fleet['flight_ok'] else 'FAILED: ' + '; '.join(fleet['failures'])))
     return '\n'.join(lines)
 
-
-def report_fleet(summaries: dict[str, dict], out_dir: Path, bag: Path | None) -> int:
-    """Write ``OUT/summary.json`` of a fleet, print its table, review each vehicle's flight into
-    ``OUT/<vehicle>/``; the exit code (0 when every vehicle's flight is OK)."""
-    fleet = fleet_summary(summaries)
-    path = write_summary(fleet, out_dir)
-    print(format_fleet_summary(fleet))
-    print(f'summary: {path}')
-    if bag:
-        print(f'bag: {bag}')
-        for name in summaries:
-            try:
-                review = review_bags([bag], out_dir / name, namespace=name)
-            except ValueError as error:   # e.g. --topics left out what the metrics need
-                print(f'review of {name} skipped: {error}')
-                continue
-            for note in review.notes:
-                print(f'note: {name}: {note}')
-            print(f'report of {name}: {review.report}')
-    return 0 if fleet['flight_ok'] else 1

@@ -24,6 +24,7 @@ from typing import Sequence
 import yaml
 
 from nnit2fsmc_controller.trajectory import make_scenario
+from quad_msgs_bridge.bag.flight_bag import disturbances_label
 
 from .fleet import FleetVehicle, fleet_home
 from .processes import NodeProcess, node_command, source_tree_environment, stop_all, wait_for_exit
@@ -87,8 +88,8 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
                       for value in make_scenario(config.scenario, offset=v.offset).initial_state]
     nodes = [('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.bag.recorder_node', home,
               {'bag': str(config.bag), 'overwrite': True, 'topics': config.topics, 'controller': config.controller,
-               'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time, **fleet,
-               **vehicle})] if config.record else []
+               'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time,
+               'disturbances': disturbances_label(config.disturbances), **fleet, **vehicle})] if config.record else []
     for v in config.vehicles:
         label = f' {v.namespace}' if fleet else ''
         nodes += [

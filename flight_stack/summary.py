@@ -5,22 +5,28 @@ import dataclasses
 import json
 from pathlib import Path
 
-from quad_msgs_bridge.review.metrics import FlightRecord, flight_metrics
+from quad_msgs_bridge.review.metrics import FlightRecord, flight_metrics, has_fuzzy_term
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 
 def build_summary(record: FlightRecord, *, backend: str, controller: str, scenario: str, seed: int,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
-                  physics_rate: float, wall_time_s: float, max_error: float) -> dict:
-    """Metrics of the flight plus everything needed to reproduce it."""
-    metrics = flight_metrics(record, settle_time, params.F_min, params.F_max)
+                  physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None) -> dict:
+    """Metrics of the flight plus everything needed to reproduce it.
+
+    ``flight_ok`` is false when the flight ended early (``failure``: why, see
+    flight_stack.closed_loop.FAILURES), a state or force went non-finite or the largest position
+    error after the settling window exceeds ``max_error`` [m]; ``failures`` says which.
+    """
+    metrics = flight_metrics(record, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
+                             ended_early=failure is not None)
     sim_time = metrics['duration_s']
-    failures = []
+    failures = [] if failure is None else [f'the flight ended early: {failure}']
     if not metrics['all_finite']:
         failures.append('non-finite state or rotor force')
     if metrics['max_position_error_m'] > max_error:
-        failures.append(f'max position error {metrics["max_position_error_m"]:.3f} m exceeds {max_error} m')
+        failures.append(f'max position error {metrics["max_position_error_m"]:.3f} m exceeds --max-error {max_error:g} m')
     return {
         **metrics,
         'flight_ok': not failures,
@@ -50,7 +56,9 @@ def format_summary(summary: dict) -> str:
     chattering = '  '.join(f'{name} {summary["chattering"][name]:.3g} {unit}/s'
                            for name, unit in zip(CONTROL_NAMES, CONTROL_UNITS))
     shares = summary['fuzzy_share']
-    share_line = '  '.join(f'{axis} {values[0]:.2f}->{values[-1]:.2f}' for axis, values in shares.items() if values)
+    share_line = (f'  fuzzy share (first -> last {summary["fuzzy_share_window_s"]:g} s window): '
+                  + '  '.join(f'{axis} {values[0]:.2f}->{values[-1]:.2f}' for axis, values in shares.items() if values)
+                  if shares is not None else f'  fuzzy share: n/a ({summary["controller"]} has no fuzzy term)')
     rtf = summary.get('real_time_factor')
     lines = [
         f'flight: {summary["controller"]} on "{summary["scenario"]}" ({summary["backend"]} backend), '
@@ -63,7 +71,7 @@ def format_summary(summary: dict) -> str:
         f'    chattering        {chattering}',
         f'    rotor saturation  {summary["saturation_fraction"] * 100:.2f} % of steps '
         f'({summary["saturation_fraction_whole_flight"] * 100:.2f} % over the whole flight)',
-        f'  corrective share (first -> last {summary["fuzzy_share_window_s"]:.0f} s window): {share_line}',
+        share_line,
         '  result: ' + ('OK' if summary['flight_ok'] else 'FAILED: ' + '; '.join(summary['failures'])),
     ]
     return '\n'.join(lines)

@@ -12,7 +12,7 @@ rm -rf build install log
 "${colcon[@]}" test-result --verbose
 status=0
 for executable in quad_sim/quad_sim nnit2fsmc_controller/nnit2fsmc_controller nnit2fsmc_controller/trajectory \
-                  quad_msgs_bridge/review/command quad_msgs_bridge/record quad_msgs_bridge/recover quad_msgs_bridge/rosbag2_qos; do
+                  quad_msgs_bridge/review quad_msgs_bridge/record quad_msgs_bridge/recover quad_msgs_bridge/rosbag2_qos; do
   package=${executable%%/*}
   if [ -x "install/$package/lib/$executable" ]; then
     echo "installed: install/$package/lib/$executable"

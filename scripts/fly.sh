@@ -5,4 +5,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup_venv.sh .venv requirements.txt
-exec .venv/bin/python run_stack.py --backend embedded "$@"
+case "${1:-}" in
+  campaign|review|recover|rosbag2-qos) exec .venv/bin/python run_stack.py "$@" ;;   # subcommands
+  *) exec .venv/bin/python run_stack.py --backend embedded "$@" ;;
+esac

@@ -29,10 +29,14 @@ def start_flight(out: Path) -> subprocess.Popen:
                             text=True, start_new_session=True)
 
 
-def wait_for_chunks(process: subprocess.Popen, storage: Path, size: int = 600_000) -> None:
-    """Wait until the bag being recorded holds a few compressed chunks."""
+def wait_for_chunks(process: subprocess.Popen, out: Path, size: int = 600_000) -> Path:
+    """Wait until the bag being recorded (in the run's staging folder beside ``out``) holds a few compressed
+    chunks; returns the bag."""
     deadline = time.monotonic() + STARTUP_TIMEOUT
-    while not (storage.exists() and storage.stat().st_size > size):
+    while True:
+        staged = list(out.parent.glob(f'{out.name}.incomplete-*/bag/bag_0.mcap'))
+        if staged and staged[0].stat().st_size > size:
+            return staged[0].parent
         assert process.poll() is None, process.communicate()
         assert time.monotonic() < deadline, 'the flight did not start recording'
         time.sleep(0.05)
@@ -48,29 +52,30 @@ def counts_read_back(bag: Path) -> dict:
 
 @pytest.mark.parametrize('stop', [signal.SIGINT, signal.SIGTERM])
 def test_sigint_or_sigterm_finalizes_the_bag(tmp_path, stop):
-    process = start_flight(tmp_path)
-    storage = tmp_path / 'bag' / 'bag_0.mcap'
-    wait_for_chunks(process, storage)
+    out = tmp_path / 'run'
+    process = start_flight(out)
+    bag = wait_for_chunks(process, out)
+    storage = bag / 'bag_0.mcap'
     process.send_signal(stop)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 130
-    assert 'interrupted; bag closed' in stderr
+    assert f'interrupted; bag closed: {bag}' in stderr and f'the unfinished run stays in {bag.parent}' in stderr
     assert is_finalized(storage)
-    counts = counts_read_back(tmp_path / 'bag')
-    information = read_metadata(tmp_path / 'bag')
+    counts = counts_read_back(bag)
+    information = read_metadata(bag)
     assert {t['topic_metadata']['name']: t['message_count'] for t in information['topics_with_message_count']} \
         == counts
     assert information['message_count'] == sum(counts.values()) > 3000
     per_step = [n for topic, n in counts.items() if not topic.endswith(('setpoints', 'reference_path'))]
     assert max(per_step) == min(per_step)              # stopped between two control steps
-    assert not (tmp_path / 'summary.json').exists()     # an interrupted flight has no summary
+    assert not out.exists() and not (bag.parent / 'summary.json').exists()   # an interrupted flight has no summary
 
 
 def test_sigkill_leaves_a_readable_prefix_that_recover_finalizes(tmp_path):
-    process = start_flight(tmp_path)
-    bag = tmp_path / 'bag'
+    out = tmp_path / 'run'
+    process = start_flight(out)
+    bag = wait_for_chunks(process, out)
     storage = bag / 'bag_0.mcap'
-    wait_for_chunks(process, storage)
     os.killpg(process.pid, signal.SIGKILL)
     process.communicate(timeout=60)
     assert not is_finalized(storage)

@@ -13,11 +13,13 @@ from rosbags.rosbag2 import StoragePlugin, Writer
 import run_stack
 from bag_support import PARAMS, SETTLE_TIME, fly_recorded
 from quad_msgs_bridge.bag.reader import BagReadError
+from quad_msgs_bridge.bag.recover import recover_main
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM,
                                        ROTOR_FORCES, resolve)
 from quad_msgs_bridge.conversions import (clock_msg, diagnostics_msg, odometry_msg, pose_stamped_msg, rosbags_kit,
                                           rotor_forces_msg, wrench_msg)
+from quad_msgs_bridge.review import command, flight_from_bag
 from quad_msgs_bridge.review.command import PLOT_HINT, main as review_main, review_bags
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -27,7 +29,9 @@ PLOTS = {'path_3d.png', 'tracking.png', 'controls.png', 'controls_zoom.png', 'su
 def assert_same_metrics(actual: dict, expected: dict, tolerance: float = 1e-9) -> None:
     """Every metric of ``expected`` equals the one in ``actual`` (floats within a relative ``tolerance``)."""
     for key, value in expected.items():
-        if isinstance(value, dict):
+        if value is None:
+            assert actual[key] is None, key
+        elif isinstance(value, dict):
             assert set(actual[key]) == set(value), key
             assert_same_metrics(actual[key], value, tolerance)
         elif isinstance(value, list):
@@ -44,18 +48,35 @@ def flights(tmp_path_factory):
     return {kind: fly_recorded(base / kind, duration=2.0, controller=kind) for kind in ('nnit2fsmc', 'smc-sign')}
 
 
-def test_the_main_job_writes_bag_and_report_whose_metrics_equal_the_live_summary(tmp_path, capsys):
-    status = run_stack.main(['--backend', 'embedded', '--duration', '6', '--out', str(tmp_path), '--quiet'])
+def test_the_main_job_writes_bag_and_report_whose_metrics_equal_the_live_summary(tmp_path, capsys, monkeypatch):
+    """The main job reviews the flight it just flew from its record in memory (it never reads its bag back);
+    `review BAG` of the bag it wrote finds the same metrics and writes the same table."""
+    def no_reading_back(*args, **kwargs):
+        raise AssertionError('the main job read its bag back')
+
+    monkeypatch.setattr(flight_from_bag, 'read_flight', no_reading_back)
+    monkeypatch.setattr(command, 'read_flight', no_reading_back)
+    out = tmp_path / 'run'
+    status = run_stack.main(['--backend', 'embedded', '--duration', '6', '--out', str(out), '--quiet'])
     assert status == 0
-    out = capsys.readouterr().out
-    assert f'bag: {tmp_path / "bag"}' in out and f'report: {tmp_path / "report.html"}' in out
-    summary = json.loads((tmp_path / 'summary.json').read_text())
-    [reviewed] = json.loads((tmp_path / 'review.json').read_text())
-    assert reviewed['control_steps'] == 6000
+    printed = capsys.readouterr().out
+    assert f'bag: {out / "bag"}' in printed and f'report: {out / "report.html"}' in printed
+    summary = json.loads((out / 'summary.json').read_text())
+    [reviewed] = json.loads((out / 'review.json').read_text())
+    assert reviewed['control_steps'] == 6000 and reviewed['bag'] == str(out / 'bag')
     metrics = {key: value for key, value in reviewed.items() if key not in ('label', 'bag')}
-    assert_same_metrics(metrics, {key: summary[key] for key in metrics})
-    assert {p.name for p in (tmp_path / 'plots').glob('*.png')} == PLOTS
-    assert (tmp_path / 'report.md').read_text().count('![') == len(PLOTS)
+    assert_same_metrics(metrics, {key: summary[key] for key in metrics}, tolerance=0.0)
+    assert {p.name for p in (out / 'plots').glob('*.png')} == PLOTS
+    assert (out / 'report.md').read_text().count('![') == len(PLOTS)
+    assert 'scenario: paper; disturbances (paper section IV): enabled' in (out / 'report.md').read_text()
+
+    monkeypatch.undo()
+    from_bag = review_bags([out / 'bag'], tmp_path / 'from-bag', plots=False)
+    # the bag holds the reference yaw as a quaternion: read back, it may differ in the last bit
+    assert_same_metrics(from_bag.metrics[0], metrics, tolerance=1e-12)
+    table = [line for line in (out / 'report.md').read_text().splitlines() if line.startswith('| ')]
+    assert table == [line for line in (tmp_path / 'from-bag' / 'report.md').read_text().splitlines()
+                     if line.startswith('| ')]
 
 
 def test_compare_overlays_and_tabulates_several_flights(flights, tmp_path):
@@ -132,3 +153,72 @@ def test_an_unfinished_bag_is_sent_to_recover(flights, tmp_path):
     os.truncate(storage, storage.stat().st_size // 2)
     with pytest.raises(BagReadError, match='recover'):
         review_bags([bag], tmp_path / 'out', plots=False)
+
+
+def not_a_bag(kind: str, tmp_path: Path, flights) -> tuple[Path, str]:
+    """A path that is not a bag, and what the error must say it is."""
+    if kind == 'text file':
+        path = tmp_path / 'README.md'
+        shutil.copy(ROOT / 'README.md', path)
+        return path, "a text file of {size} bytes (it begins '# "
+    if kind == 'metadata file':
+        return flights['nnit2fsmc'].bag / 'metadata.yaml', \
+            f'the metadata file of a bag, not the bag; give its directory: {flights["nnit2fsmc"].bag}'
+    if kind == 'renamed text file':
+        path = tmp_path / 'flight.mcap'
+        shutil.copy(ROOT / 'README.md', path)
+        return path, 'a text file of {size} bytes'
+    if kind == 'empty mcap':
+        path = tmp_path / 'empty.mcap'
+        path.write_bytes(b'')
+        return path, 'an empty file (0 bytes)'
+    path = tmp_path / 'folder'
+    path.mkdir()
+    (path / 'notes.txt').write_text('x')
+    return path, 'a directory without metadata.yaml or .mcap file, not a bag'
+
+
+@pytest.mark.parametrize('kind', ['text file', 'metadata file', 'renamed text file', 'empty mcap', 'directory'])
+def test_review_of_what_is_not_a_bag_says_what_it_is(kind, flights, tmp_path, capsys):
+    path, expected = not_a_bag(kind, tmp_path, flights)
+    if path.is_file():
+        expected = expected.format(size=path.stat().st_size)
+    assert review_main([str(path), '--out', str(tmp_path / 'out')]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f'error: {path}: ') and expected in err, err
+    assert 'Traceback' not in err and 'killed' not in err and 'recover' not in err
+    if kind != 'metadata file':
+        assert 'expected a rosbag2 bag directory (holding metadata.yaml) or an MCAP file' in err
+
+
+@pytest.mark.parametrize('kind', ['text file', 'renamed text file', 'empty mcap'])
+def test_recover_of_what_is_not_an_mcap_file_says_what_it_is_and_leaves_it(kind, flights, tmp_path, capsys):
+    path, expected = not_a_bag(kind, tmp_path, flights)
+    before = path.read_bytes()
+    assert recover_main([str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f'error: {path}: ') and expected.format(size=len(before)) in err
+    assert 'not an MCAP file; recover finalizes the MCAP file' in err and '.killed' not in err
+    assert path.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == [path.name]
+
+
+def test_the_report_says_what_was_flown_and_what_each_metric_means(flights, tmp_path):
+    review_bags([flights['nnit2fsmc'].bag], tmp_path, plots=False)
+    report = (tmp_path / 'report.md').read_text()
+    for fact in ('controller: nnit2fsmc', 'scenario: paper', 'disturbances (paper section IV): enabled',
+                 'backend: embedded', 'NN seed: 0'):
+        assert fact in report, fact
+    assert '## Metrics' in report and '### What the metrics mean' in report
+    for metric in ('settle time', 'position RMSE', 'max position error', 'yaw RMSE', 'chattering U1..U4',
+                   'rotor saturation', 'fuzzy share'):
+        assert f'- **{metric}**: ' in report, metric
+    html = (tmp_path / 'report.html').read_text()
+    assert 'What the metrics mean' in html and 'scenario: paper' in html
+
+
+def test_a_flight_without_fuzzy_term_has_no_fuzzy_share(flights, tmp_path):
+    review = review_bags([flights['smc-sign'].bag], tmp_path, plots=True)
+    assert review.metrics[0]['fuzzy_share'] is None
+    assert 'fuzzy_share.png' not in {p.name for p in review.plots} and len(review.plots) == len(PLOTS) - 1
+    rows = [line for line in (tmp_path / 'report.md').read_text().splitlines() if line.startswith('| fuzzy share')]
+    assert len(rows) == 6 and all(row.endswith('| n/a |') for row in rows)

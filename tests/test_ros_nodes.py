@@ -7,6 +7,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -137,10 +138,11 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
         assert ros_payloads[topic] == messages, f'{topic}: the ROS flight sent other bytes than the embedded one'
 
 
-def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str, bag) -> tuple[int, str]:
-    """Start ``run_stack.py --backend ros ARGUMENTS --bag BAG --duration 60``, SIGKILL the controller of the vehicle in
-    ``namespace`` once /clock says 3 s of sim time are flown; (exit code, output) of the entry script. Asserts that no
-    node is left running."""
+def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str, tmp_path) -> tuple[int, str, Path]:
+    """Start ``run_stack.py --backend ros ARGUMENTS --duration 60 --out TMP/run``, SIGKILL the controller of the
+    vehicle in ``namespace`` once /clock says 3 s of sim time are flown; (exit code, output, bag) of the entry
+    script. Asserts that no node is left running and that the unfinished run left --out alone and said where its
+    closed bag stays (the run's staging folder)."""
     import os
     from flight_stack.processes import source_tree_environment
     from quad_msgs_bridge.contract import CLOCK
@@ -149,9 +151,10 @@ def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str,
     ros_node.create_subscription(rclpy_kit()[CLOCK.type], CLOCK.name,
                                  lambda msg: sim_time.__setitem__(0, msg.clock.sec + 1e-9 * msg.clock.nanosec),
                                  qos_profile(CLOCK.qos))
+    out = tmp_path / 'run'
     stack = subprocess.Popen(
         [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', *arguments, '--duration', '60',
-         '--out', str(bag.parent), '--bag', str(bag), '--quiet'],
+         '--out', str(out), '--quiet'],
         env=source_tree_environment(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         assert spin_until(ros_node, lambda: sim_time[0] >= 3.0, timeout=120.0), 'the flight never reached 3 s'
@@ -166,16 +169,19 @@ def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str,
     root = namespace.split('/')[0]
     leftovers = subprocess.run(['pgrep', '-f', f'__ns:=/{root}'], capture_output=True, text=True).stdout.split()
     assert leftovers == [], 'nodes left running after the entry script exited'
-    return stack.returncode, output
+    assert not out.exists()     # an unfinished run leaves nothing in --out; its bag stays in the staging folder
+    [bag] = tmp_path.glob('run.incomplete-*/bag')
+    assert f'the bag is closed: {bag}' in output
+    return stack.returncode, output, bag
 
 
 def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(ros_node, tmp_path):
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
-    code, output = kill_a_controller_mid_flight(ros_node, ['--namespace', 'killed'], 'killed', tmp_path / 'bag')
+    code, output, bag = kill_a_controller_mid_flight(ros_node, ['--namespace', 'killed'], 'killed', tmp_path)
     assert code == 1, output
     assert 'error: the flight failed: controller (' in output
-    flight = read_flight(tmp_path / 'bag')   # the recorder finalized what it had: readable, a prefix of the flight
+    flight = read_flight(bag)   # the recorder finalized what it had: readable, a prefix of the flight
     assert 3.0 <= flight.record.time[-1] < 59.0
 
 
@@ -237,12 +243,12 @@ def test_a_lockstep_fleet_flies_each_vehicle_exactly_as_it_flies_alone(tmp_path)
 def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_readable(ros_node, tmp_path):
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
-    code, output = kill_a_controller_mid_flight(ros_node, ['--vehicles', '2', '--namespace', 'deadfleet'],
-                                                'deadfleet/uav2', tmp_path / 'bag')
+    code, output, bag = kill_a_controller_mid_flight(ros_node, ['--vehicles', '2', '--namespace', 'deadfleet'],
+                                                     'deadfleet/uav2', tmp_path)
     assert code == 1, output
     assert 'error: the flight failed: controller deadfleet/uav2 (' in output
     for name in ('uav1', 'uav2'):   # the recorder finalized what it had: each vehicle a readable prefix of its flight
-        flight = read_flight(tmp_path / 'bag', namespace=f'deadfleet/{name}')
+        flight = read_flight(bag, namespace=f'deadfleet/{name}')
         assert 3.0 <= flight.record.time[-1] < 59.0
 
 

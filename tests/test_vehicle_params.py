@@ -1,6 +1,9 @@
 """Vehicle parameters (paper Table I) and section IV disturbances: loading and validation."""
+import dataclasses
+import json
 import math
 
+import numpy as np
 import pytest
 import yaml
 
@@ -122,3 +125,108 @@ def test_check_number_bounds():
     with pytest.raises(ParameterError, match='k'):
         check_number('k', 1.5, 0.0, 1.0)
     assert isinstance(check_number('k', 3, 0.0), float)
+
+
+# --- the true-vehicle entries (optional) and batches of vehicles ---------------------------------
+
+def test_perturbation_entries_are_optional_and_default_to_an_unperturbed_vehicle(tmp_path):
+    document = default_document()
+    for key in ('cog_offset', 'rotor_thrust_factors', 'rotor_drag_factors', 'rotor_efficiency_loss', 'wind_drag'):
+        del document['vehicle'][key]
+    path = tmp_path / 'old.yaml'
+    path.write_text(yaml.safe_dump(document))
+    params, _ = load_vehicle_file(path)
+    assert params == load_vehicle_file()[0]
+    assert params.cog_offset == (0.0, 0.0, 0.0)
+    assert params.rotor_thrust_factors == params.rotor_drag_factors == (1.0, 1.0, 1.0, 1.0)
+    assert params.rotor_efficiency_loss == (0.0, 0.0, 0.0, 0.0)
+
+
+def test_perturbation_entries_are_read(tmp_path):
+    document = default_document()
+    document['vehicle'].update(cog_offset=[0.01, -0.02, 0], rotor_thrust_factors=[1.1, 1, 0.9, 1],
+                               rotor_efficiency_loss=[0, 0.25, 0, 0], wind_drag=0.3)
+    path = tmp_path / 'true.yaml'
+    path.write_text(yaml.safe_dump(document))
+    params, _ = load_vehicle_file(path)
+    assert params.cog_offset == (0.01, -0.02, 0.0)
+    assert params.rotor_thrust_factors == (1.1, 1.0, 0.9, 1.0)
+    assert params.rotor_efficiency_loss == (0.0, 0.25, 0.0, 0.0)
+    assert params.wind_drag == 0.3
+    assert all(type(v) is float for v in (*params.cog_offset, *params.rotor_thrust_factors))
+
+
+def test_json_round_trip_of_a_perturbed_vehicle():
+    """Bags and summaries store dataclasses.asdict(params) as JSON; it must load back identically."""
+    params = dataclasses.replace(load_vehicle_file()[0], cog_offset=(0.01, 0.0, -0.01),
+                                 rotor_drag_factors=(1.0, 1.1, 0.9, 1.0))
+    assert VehicleParams.from_mapping(json.loads(json.dumps(dataclasses.asdict(params)))) == params
+
+
+@pytest.mark.parametrize('name, value, fragment', [
+    ('cog_offset', [0.0, 0.0], r'vehicle\.cog_offset: expected a list of 3'),
+    ('cog_offset', 0.01, r'vehicle\.cog_offset: expected a list of 3'),
+    ('cog_offset', [0.0, math.nan, 0.0], r'vehicle\.cog_offset\[1\]'),
+    ('cog_offset', [0.3, 0.0, 0.0], r'vehicle\.cog_offset: x = 0\.3 m is not within the arm length'),
+    ('rotor_thrust_factors', [1.0, 1.0, 0.0, 1.0],
+     r'vehicle\.rotor_thrust_factors\[2\]: 0\.0 is outside the valid range \(0\.0, inf\)'),
+    ('rotor_thrust_factors', [1.0, 1.0, 1.0], r'vehicle\.rotor_thrust_factors: expected a list of 4'),
+    ('rotor_thrust_factors', 'strong', r'vehicle\.rotor_thrust_factors: expected a list of 4'),
+    ('rotor_drag_factors', [1.0, -1.0, 1.0, 1.0], r'vehicle\.rotor_drag_factors\[1\]'),
+    ('rotor_efficiency_loss', [0.0, 0.0, 0.0, 1.0],
+     r'vehicle\.rotor_efficiency_loss\[3\]: 1\.0 is outside the valid range \[0\.0, 1\.0\)'),
+    ('rotor_efficiency_loss', [-0.1, 0.0, 0.0, 0.0], r'vehicle\.rotor_efficiency_loss\[0\]'),
+    ('rotor_efficiency_loss', [0.0, True, 0.0, 0.0], r'vehicle\.rotor_efficiency_loss\[1\]: expected a number'),
+    ('wind_drag', -0.1, r'vehicle\.wind_drag'),
+    ('wind_drag', math.inf, r'vehicle\.wind_drag'),
+])
+def test_invalid_perturbation_entry_is_named(name, value, fragment):
+    values = default_document()['vehicle']
+    values[name] = value
+    with pytest.raises(ParameterError, match=fragment):
+        VehicleParams.from_mapping(values)
+
+
+def test_stack_makes_a_batch_with_one_element_per_vehicle():
+    params = load_vehicle_file()[0]
+    vehicles = [dataclasses.replace(params, m=(0.4, 0.5, 0.6)[i], cog_offset=(0.001 * i, 0.0, 0.0),
+                                    rotor_efficiency_loss=(0.0, 0.01 * i, 0.0, 0.0)) for i in range(3)]
+    batch = VehicleParams.stack(vehicles)
+    np.testing.assert_array_equal(batch.m, [0.4, 0.5, 0.6])
+    np.testing.assert_array_equal(batch.cog_offset[0], [0.0, 0.001, 0.002])
+    np.testing.assert_array_equal(batch.rotor_efficiency_loss[1], [0.0, 0.01, 0.02])
+    np.testing.assert_array_equal(batch.Ix, [params.Ix] * 3)
+    np.testing.assert_allclose(batch.hover_force, [0.4 * 9.81 / 4, 0.5 * 9.81 / 4, 0.6 * 9.81 / 4], rtol=1e-15)
+    with pytest.raises(ParameterError, match='vehicles'):
+        VehicleParams.stack([])
+
+
+@pytest.mark.parametrize('changes, fragment', [
+    ({'m': np.array([0.5, -0.5, 0.4])}, r'vehicle\.m \(vehicle 1\): -0\.5 is outside'),
+    ({'Iz': np.array([7e-3, np.nan])}, r'vehicle\.Iz \(vehicle 1\)'),
+    ({'m': np.array([0.5, 0.5]), 'Ix': np.array([3e-3, 3e-3, 3e-3])},
+     r'vehicle\.Ix: 3 vehicles, but vehicle\.m has 2'),
+    ({'m': np.array([[0.5, 0.5]])}, r'vehicle\.m: expected a number or a 1-D numeric array'),
+    ({'m': np.array([True, False])}, r'vehicle\.m: expected a number or a 1-D numeric array'),
+    ({'rotor_efficiency_loss': (0.0, np.array([0.0, 1.2]), 0.0, 0.0)},
+     r'vehicle\.rotor_efficiency_loss\[1\] \(vehicle 1\)'),
+    ({'m': np.array([0.4, 1.3])}, r'vehicle\.F_max: 2\.6818 N cannot hover the vehicle.*\(vehicle 1\)'),
+    ({'cog_offset': (np.array([0.0, 0.0, 0.26]), 0.0, 0.0)}, r'vehicle\.cog_offset: x = 0\.26 m .*\(vehicle 2\)'),
+])
+def test_batch_values_are_checked_per_vehicle(changes, fragment):
+    with pytest.raises(ParameterError, match=fragment):
+        dataclasses.replace(load_vehicle_file()[0], **changes)
+
+
+@pytest.mark.parametrize('value, low, high, low_inclusive, message', [
+    (math.inf, 0.0, math.inf, True, 'x: must be finite, got inf (valid range [0.0, inf))'),
+    (math.nan, 0.0, math.inf, False, 'x: must be finite, got nan (valid range (0.0, inf))'),
+    (-math.inf, -math.inf, math.inf, True, 'x: must be finite, got -inf'),
+    (-1.0, 0.0, math.inf, False, 'x: -1.0 is outside the valid range (0.0, inf)'),
+    (7.0, -math.inf, 5.0, True, 'x: 7.0 is outside the valid range (-inf, 5.0]'),
+])
+def test_range_errors_read_as_intervals(value, low, high, low_inclusive, message):
+    """An infinite bound is an open end: never 'inf is outside the valid range (0.0, inf]'."""
+    with pytest.raises(ParameterError) as error:
+        check_number('x', value, low, high, low_inclusive=low_inclusive)
+    assert str(error.value) == message

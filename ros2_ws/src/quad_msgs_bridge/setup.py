@@ -14,13 +14,15 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob(package_name + '/config/*.yaml')),
     ],
-    install_requires=['setuptools'],
+    # the same as the root pyproject.toml's (pip install .); package.xml names them by rosdep key
+    install_requires=['setuptools', 'numpy>=1.26.4', 'PyYAML>=6.0', 'rosbags>=0.11.9,<0.12', 'mcap>=1.6.0,<2',
+                      'mcap-ros2-support>=0.6.0', 'zstandard>=0.25.0'],
     zip_safe=True,
     maintainer='NNIT2FSMC flight stack maintainers',
     maintainer_email='maintainers@nnit2fsmc.invalid',
     description="The NNIT2FSMC stack's contract: topic names, QoS, frames, message and numpy conversions, the vehicle description, MCAP bag writing, reading and review.",
     license='Apache-2.0',
-    extras_require={'test': ['pytest'], 'plots': ['matplotlib']},
+    extras_require={'test': ['pytest'], 'plots': ['matplotlib>=3.11.2']},
     entry_points={'console_scripts': [
         'record = quad_msgs_bridge.bag.recorder_node:main',
         'review = quad_msgs_bridge.review.command:main',

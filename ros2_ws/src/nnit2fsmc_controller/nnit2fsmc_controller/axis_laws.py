@@ -14,11 +14,15 @@ are on their way).
 * :class:`SlidingModeLaw`: classic SMC, v = (ref_acc - lambda de - drift - K sw(S)) / gain, with
   sw = sign (``boundary_layer`` = 0) or sat(S / boundary_layer).
 * :class:`PIDLaw`: v = (ref_acc - kp e - ki int(e) - kd de - drift) / gain, anti-windup by clamping.
+
+Every argument is a float (one vehicle) or a numpy array with one element per vehicle (a batch;
+reference values may stay floats, shared by all vehicles); so is every output.
 """
 from __future__ import annotations
 
 from typing import NamedTuple
 
+from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.vehicle_params import check_number
 
 from .it2_fuzzy import IT2FuzzyCorrector
@@ -52,18 +56,21 @@ class NNIT2FSMCLaw:
     hit the ground).
     """
 
+    STATE = ('_teaching',)   #: what a retune keeps (nnit2fsmc_controller.tuning); the network's is its own
+
     def __init__(self, lam: float, fuzzy: IT2FuzzyCorrector, network: EquivalentControlNetwork):
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
         self.fuzzy = fuzzy
         self.network = network
-        self._teaching: float | None = None   #: fuzzy term the network has yet to learn from
+        self._teaching = None   #: fuzzy term the network has yet to learn from (0 where it must not learn)
 
-    def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
+    def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         self.adapt()
+        xp = namespace_for(e)
         surface = de + self.lam * e
         corrective = self.fuzzy(surface)
         equivalent = self.network.forward((ref_vel, ref_acc, 1.0))
-        self._teaching = corrective if abs(surface) < self.fuzzy.input_scale else None
+        self._teaching = xp.where(xp.abs(surface) < self.fuzzy.input_scale, corrective, 0.0)
         return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
 
     def adapt(self) -> None:
@@ -76,21 +83,24 @@ class NNIT2FSMCLaw:
 class SlidingModeLaw:
     """Classic SMC with the nominal model's equivalent control and a sign or saturated switching term."""
 
+    STATE = ()
+
     def __init__(self, lam: float, switching_gain: float, boundary_layer: float = 0.0):
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
         self.switching_gain = check_number('switching_gain', switching_gain, 0.0)
         self.boundary_layer = check_number('boundary_layer', boundary_layer, 0.0)
 
-    def switching(self, surface: float) -> float:
+    def switching(self, surface):
         """sign(S), or sat(S / boundary_layer) when a boundary layer is set."""
+        xp = namespace_for(surface)
         if self.boundary_layer > 0.0:
-            return max(-1.0, min(1.0, surface / self.boundary_layer))
-        return 1.0 if surface > 0.0 else -1.0 if surface < 0.0 else 0.0   # also for numpy scalars
+            return xp.clip(surface / self.boundary_layer, -1.0, 1.0)
+        return xp.sign(surface)
 
     def adapt(self) -> None:
         """Nothing to learn."""
 
-    def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
+    def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         surface = de + self.lam * e
         equivalent = (ref_acc - self.lam * de - drift) / gain
         corrective = -self.switching_gain * self.switching(surface) / gain
@@ -99,6 +109,8 @@ class SlidingModeLaw:
 
 class PIDLaw:
     """PID on the error with feed-forward of the reference and of the nominal drift."""
+
+    STATE = ('integral',)
 
     def __init__(self, lam: float, kp: float, ki: float, kd: float, integral_limit: float, dt: float):
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
@@ -112,9 +124,9 @@ class PIDLaw:
     def adapt(self) -> None:
         """Nothing to learn (the integral is part of the update)."""
 
-    def update(self, e: float, de: float, ref_vel: float, ref_acc: float, drift: float, gain: float) -> AxisOutput:
+    def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         limit = self.integral_limit
-        self.integral = max(-limit, min(limit, self.integral + e * self.dt))
+        self.integral = namespace_for(e).clip(self.integral + e * self.dt, -limit, limit)
         feedback = -(self.kp * e + self.ki * self.integral + self.kd * de)
         value = (ref_acc + feedback - drift) / gain
-        return AxisOutput(value, de + self.lam * e, value, 0.0)
+        return AxisOutput(value, de + self.lam * e, value, 0.0 * value)

@@ -28,6 +28,11 @@ q'' = drift + gain v with, from eq. (1),
   phi:   drift = (dtheta dpsi (Iy - Iz) - Kfphi dphi|dphi|) / Ix,    gain = d / Ix
   theta: drift = (dphi dpsi (Iz - Ix) - Kftheta dtheta|dtheta|) / Iy, gain = d / Iy
   psi:   drift = (dphi dtheta (Ix - Iy) - Kfpsi dpsi|dpsi|) / Iz,    gain = 1 / Iz
+
+One controller steps one vehicle (every state component a float) or a batch of B vehicles (every
+state component a numpy array of B values; build it with ``batch=B``): the same code, through the
+elementwise namespace of :mod:`quad_msgs_bridge.numeric`. The reference may be floats shared by
+every vehicle of a batch, or arrays.
 """
 from __future__ import annotations
 
@@ -35,6 +40,7 @@ import math
 from typing import NamedTuple, Sequence
 
 from quad_msgs_bridge.frames import wrap_angle
+from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.mixer import controls_from_forces, forces_from_controls, saturate_forces
 from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
@@ -54,23 +60,30 @@ class ControlOutput(NamedTuple):
 
 
 class RateFilter:
-    """First-order filtered derivative of a signal sampled every dt [s], time constant tau [s]."""
+    """First-order filtered derivative of a signal sampled every dt [s], time constant tau [s].
+
+    The first sample gives rate 0 (a batch starts all its vehicles together).
+    """
+
+    STATE = ('previous', 'rate')   #: what a retune keeps (nnit2fsmc_controller.tuning)
 
     def __init__(self, dt: float, tau: float):
         self.blend = dt / (tau + dt)
         self.dt = dt
-        self.previous: float | None = None
+        self.previous = None
         self.rate = 0.0
 
-    def update(self, value: float) -> float:
+    def update(self, value):
         if self.previous is not None:
-            self.rate += self.blend * ((value - self.previous) / self.dt - self.rate)
+            self.rate = self.rate + self.blend * ((value - self.previous) / self.dt - self.rate)
         self.previous = value
         return self.rate
 
 
 class CascadedController:
     """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws."""
+
+    STATE = ()   #: its state lives in its laws and rate filters (nnit2fsmc_controller.tuning)
 
     def __init__(self, name: str, params: VehicleParams, laws: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02):
@@ -86,20 +99,22 @@ class CascadedController:
         self._max_horizontal = params.g * math.tan(self.max_tilt)
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
 
-    def update(self, t: float, state: Sequence[float], reference: ReferenceSample) -> ControlOutput:
+    def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
         """Rotor thrusts [N] for the 12-state ``state`` and the reference at the same instant t [s].
 
-        Raises ValueError on a non-finite state or reference, before any law (or its learning) runs.
+        Raises ValueError on a non-finite state or reference (of any vehicle of a batch), before any
+        law (or its learning) runs.
         """
+        xp = namespace_for(state[0])
         values = (*state, *reference.position, *reference.velocity, *reference.acceleration,
                   reference.yaw, reference.yaw_rate, reference.yaw_acceleration)
-        if not all(map(math.isfinite, values)):
+        if not xp.all_finite(values):
             raise ValueError(f'non-finite state or reference at t={t}')
         p = self.params
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         (xd, yd, zd), (vxd, vyd, vzd), (axd, ayd, azd) = reference.position, reference.velocity, reference.acceleration
         laws = self.laws
-        cphi, ctheta = math.cos(phi), math.cos(theta)
+        cphi, ctheta = xp.cos(phi), xp.cos(theta)
 
         out_x = laws['x'].update(x - xd, vx - vxd, vxd, axd, -p.Kfx * vx / p.m, 1.0)
         out_y = laws['y'].update(y - yd, vy - vyd, vyd, ayd, -p.Kfy * vy / p.m, 1.0)
@@ -114,14 +129,14 @@ class CascadedController:
         psi_d = reference.yaw
 
         out_phi = laws['phi'].update(phi - phi_d, dphi - dphi_d, dphi_d, ddphi_d,
-                                     (dtheta * dpsi * (p.Iy - p.Iz) - p.Kfphi * dphi * abs(dphi)) / p.Ix,
+                                     (dtheta * dpsi * (p.Iy - p.Iz) - p.Kfphi * xp.signed_square(dphi)) / p.Ix,
                                      p.d / p.Ix)
         out_theta = laws['theta'].update(theta - theta_d, dtheta - dtheta_d, dtheta_d, ddtheta_d,
-                                         (dphi * dpsi * (p.Iz - p.Ix) - p.Kftheta * dtheta * abs(dtheta)) / p.Iy,
+                                         (dphi * dpsi * (p.Iz - p.Ix) - p.Kftheta * xp.signed_square(dtheta)) / p.Iy,
                                          p.d / p.Iy)
         out_psi = laws['psi'].update(wrap_angle(psi - psi_d), dpsi - reference.yaw_rate, reference.yaw_rate,
                                      reference.yaw_acceleration,
-                                     (dphi * dtheta * (p.Ix - p.Iy) - p.Kfpsi * dpsi * abs(dpsi)) / p.Iz,
+                                     (dphi * dtheta * (p.Ix - p.Iy) - p.Kfpsi * xp.signed_square(dpsi)) / p.Iz,
                                      1.0 / p.Iz)
 
         forces = saturate_forces(
@@ -142,13 +157,19 @@ class CascadedController:
         for law in self.laws.values():
             law.adapt()
 
-    def attitude_from_accelerations(self, ax: float, ay: float, psi: float) -> tuple[float, float]:
-        """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi."""
-        norm = math.hypot(ax, ay)
-        if norm > self._max_horizontal:
-            ax, ay = ax * self._max_horizontal / norm, ay * self._max_horizontal / norm
+    def attitude_from_accelerations(self, ax, ay, psi):
+        """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi.
+
+        Beyond the tilt limit the acceleration is scaled down to it, its direction kept.
+        """
+        xp = namespace_for(psi)
+        limit = self._max_horizontal
+        norm = xp.hypot(ax, ay)
+        beyond = norm > limit
+        divisor = xp.maximum(norm, limit)     # = norm wherever it is used: never a division by zero
+        ax, ay = xp.where(beyond, ax * limit / divisor, ax), xp.where(beyond, ay * limit / divisor, ay)
         g = self.params.g
-        cpsi, spsi = math.cos(psi), math.sin(psi)
-        theta_d = math.atan2(ax * cpsi + ay * spsi, g)
-        phi_d = math.atan((ax * spsi - ay * cpsi) * math.cos(theta_d) / g)
+        cpsi, spsi = xp.cos(psi), xp.sin(psi)
+        theta_d = xp.atan2(ax * cpsi + ay * spsi, g)
+        phi_d = xp.atan((ax * spsi - ay * cpsi) * xp.cos(theta_d) / g)
         return phi_d, theta_d

@@ -72,8 +72,13 @@ def control_period(gains: Mapping[str, Any]) -> float:
     return 1.0 / _positive(gains, 'common.control_rate')
 
 
-def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] | None = None) -> CascadedController:
-    """A fresh controller of ``kind`` (one of CONTROLLERS) for the vehicle ``params``."""
+def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] | None = None,
+                     batch: int | None = None) -> CascadedController:
+    """A fresh controller of ``kind`` (one of CONTROLLERS) for the nominal vehicle ``params``.
+
+    ``batch``: None for one vehicle (states of floats), or the number B of vehicles it steps at once
+    (states of numpy arrays of B values; every vehicle has its own network weights).
+    """
     gains = load_gains() if gains is None else gains
     dt = control_period(gains)
     lam = {axis: _positive(gains, f'common.lambda.{axis}') for axis in AXES}
@@ -94,7 +99,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
                 output_gain=_positive(gains, f'{key}.nn_gain'),
                 learning_rate=_non_negative(gains, f'{key}.learning_rate'),
                 weight_limit=_positive(gains, 'nnit2fsmc.weight_limit'),
-                seed=seed * len(AXES) + index)
+                seed=seed * len(AXES) + index, batch=batch)
             laws[axis] = NNIT2FSMCLaw(lam[axis], fuzzy, network)
     elif kind in ('smc-sign', 'smc-sat'):
         laws = {axis: SlidingModeLaw(

@@ -12,15 +12,25 @@ the fuzzy corrective term, so gradient descent with rate alpha gives
     Wz[j][i] += alpha * 1/4 * U_fuzzy K_eq (1 - U_out^2) Wy[j] (1 - Y_j^2) Z_i   (7), (9)
 
 Every weight is projected back onto [-weight_limit, weight_limit] after each update, so online
-learning cannot diverge whatever the fuzzy term does. Plain-float lists: one network per
-subsystem is small (a few dozen weights) and pure Python is faster than numpy at this size.
+learning cannot diverge whatever the fuzzy term does.
+
+Each equation is written once, in :class:`EquivalentControlNetwork`, on top of a small layer
+algebra with two implementations of the same four operations: :class:`ListLayers` for one vehicle
+(lists of plain floats: one network per subsystem has a few dozen weights, and pure Python is far
+faster than numpy at this size) and :class:`ArrayLayers` for a batch of B vehicles (hidden weights
+an array (H, I, B), output weights (H, B): one network per vehicle, each learning from its own
+fuzzy term, at numpy speed whatever H and I).
 """
 from __future__ import annotations
 
 import math
 import random
+from operator import mul
 from typing import Sequence
 
+import numpy as np
+
+from quad_msgs_bridge.numeric import BATCH, SCALAR, is_batch
 from quad_msgs_bridge.vehicle_params import check_number
 
 
@@ -29,57 +39,134 @@ def bipolar_sigmoid(x: float) -> float:
     return math.tanh(0.5 * x)
 
 
+class ListLayers:
+    """Layer operations of one vehicle's network: vectors are lists of floats, matrices lists of rows."""
+
+    @staticmethod
+    def weights(values: list, batch: int | None) -> list:
+        return [list(map(float, row)) if isinstance(row, list) else float(row) for row in values]
+
+    @staticmethod
+    def weighted_sums(matrix: list, inputs: Sequence) -> list:
+        """sum_i W[j][i] x_i for every row j."""
+        return [sum(map(mul, row, inputs)) for row in matrix]
+
+    @staticmethod
+    def dot(vector: list, other: list):
+        return sum(map(mul, vector, other))
+
+    @staticmethod
+    def elementwise(function, *vectors) -> list:
+        """function applied to the j-th elements of the vectors, for every j."""
+        return list(map(function, *vectors))
+
+    @staticmethod
+    def outer_step(matrix: list, steps: list, inputs: Sequence, limit: float) -> list:
+        """W[j][i] - step_j x_i, each weight clipped to [-limit, limit]."""
+        return [SCALAR.project([w - step * x for w, x in zip(row, inputs)], limit) for row, step in zip(matrix, steps)]
+
+    @staticmethod
+    def step(vector: list, steps: list, limit: float) -> list:
+        """w_j - step_j, clipped to [-limit, limit]."""
+        return SCALAR.project([w - step for w, step in zip(vector, steps)], limit)
+
+
+class ArrayLayers:
+    """The same operations for B vehicles: the last axis of every array is the vehicle."""
+
+    @staticmethod
+    def weights(values: list, batch: int) -> np.ndarray:
+        return np.repeat(np.asarray(values, dtype=float)[..., None], batch, axis=-1)
+
+    @staticmethod
+    def weighted_sums(matrix: np.ndarray, inputs: Sequence) -> np.ndarray:
+        return sum(matrix[:, i] * x for i, x in enumerate(inputs))
+
+    @staticmethod
+    def dot(vector: np.ndarray, other: np.ndarray):
+        return (vector * other).sum(axis=0)
+
+    @staticmethod
+    def elementwise(function, *vectors):
+        return function(*vectors)
+
+    @staticmethod
+    def outer_step(matrix: np.ndarray, steps: np.ndarray, inputs: Sequence, limit: float) -> np.ndarray:
+        updated = np.empty_like(matrix)
+        for i, x in enumerate(inputs):
+            np.subtract(matrix[:, i], steps * x, out=updated[:, i])
+        return np.clip(updated, -limit, limit, out=updated)
+
+    @staticmethod
+    def step(vector: np.ndarray, steps: np.ndarray, limit: float) -> np.ndarray:
+        return np.clip(vector - steps, -limit, limit)
+
+
 class EquivalentControlNetwork:
     """U_eq_hat = K_eq g(Wy . g(Wz Z)); online gradient learning from the fuzzy term."""
 
+    #: what a retune keeps (nnit2fsmc_controller.tuning): the weights and the last forward pass
+    STATE = ('hidden_weights', 'output_weights', '_inputs', '_hidden', '_output')
+
     def __init__(self, n_inputs: int, n_hidden: int, output_gain: float, learning_rate: float,
-                 weight_limit: float = 10.0, initial_spread: float = 0.5, seed: int = 0):
+                 weight_limit: float = 10.0, initial_spread: float = 0.5, seed: int = 0,
+                 batch: int | None = None):
+        """``batch``: None for one vehicle (float weights), else the number of vehicles B (array weights)."""
         self.output_gain = check_number('output_gain', output_gain, 0.0, low_inclusive=False)
         self.learning_rate = check_number('learning_rate', learning_rate, 0.0)
         self.weight_limit = check_number('weight_limit', weight_limit, 0.0, low_inclusive=False)
         if n_inputs < 1 or n_hidden < 1:
             raise ValueError(f'network needs at least one input and one hidden unit, got {n_inputs}, {n_hidden}')
         rng = random.Random(seed)
+        self.xp = SCALAR if batch is None else BATCH
+        self.layers = ListLayers if batch is None else ArrayLayers
+        initial_hidden = [[rng.uniform(-initial_spread, initial_spread) for _ in range(n_inputs)]
+                          for _ in range(n_hidden)]
         #: hidden weights Wz[j][i]: random, to break the symmetry between hidden units
-        self.hidden_weights = [[rng.uniform(-initial_spread, initial_spread) for _ in range(n_inputs)]
-                               for _ in range(n_hidden)]
+        self.hidden_weights = self.layers.weights(initial_hidden, batch)
         #: output weights Wy[j]: zero, so the network starts knowing nothing (U_eq_hat = 0)
-        self.output_weights = [0.0] * n_hidden
-        self._inputs: Sequence[float] = (0.0,) * n_inputs
-        self._hidden = [0.0] * n_hidden
-        self._output = 0.0
+        self.output_weights = self.layers.weights([0.0] * n_hidden, batch)
+        self._inputs: Sequence = (0.0,) * n_inputs
+        self._hidden = self.layers.weights([0.0] * n_hidden, batch)
+        self._output = 0.0 if batch is None else np.zeros(batch)
 
-    def forward(self, inputs: Sequence[float]) -> float:
-        """U_eq_hat for input vector Z (eqs. 4 and the layer sums); remembers activations for learn()."""
-        tanh = math.tanh
-        hidden = [tanh(0.5 * sum(w * z for w, z in zip(row, inputs))) for row in self.hidden_weights]
-        output = tanh(0.5 * sum(w * y for w, y in zip(self.output_weights, hidden)))
+    def forward(self, inputs: Sequence) -> float:
+        """U_eq_hat for input vector Z (eqs. 4 and the layer sums); remembers activations for learn().
+
+        Each input is a float (shared by every vehicle of a batch) or an array of one per vehicle.
+        """
+        layers, tanh = self.layers, self.xp.tanh
+        hidden = layers.elementwise(lambda total: tanh(0.5 * total), layers.weighted_sums(self.hidden_weights, inputs))
+        output = tanh(0.5 * layers.dot(self.output_weights, hidden))
         self._inputs, self._hidden, self._output = inputs, hidden, output
         return self.output_gain * output
 
-    def gradients(self, u_fuzzy: float) -> tuple[list[float], list[list[float]]]:
-        """(dE/dWy, dE/dWz) of eqs. (8) and (9) at the last forward pass, error measured by u_fuzzy."""
+    def _error_factors(self, u_fuzzy):
+        """Per hidden unit j: (dE/dWy[j], dE/dWz[j][i] / Z_i) of eqs. (8) and (9) at the last forward pass."""
         common = u_fuzzy * self.output_gain * (1.0 - self._output * self._output)
-        grad_output = [-0.5 * common * y for y in self._hidden]
-        grad_hidden = [[-0.25 * common * wy * (1.0 - y * y) * z for z in self._inputs]
-                       for wy, y in zip(self.output_weights, self._hidden)]
-        return grad_output, grad_hidden
+        output_factors = self.layers.elementwise(lambda y: -0.5 * common * y, self._hidden)
+        hidden_factors = self.layers.elementwise(lambda wy, y: -0.25 * common * wy * (1.0 - y * y),
+                                                 self.output_weights, self._hidden)
+        return output_factors, hidden_factors
 
-    def learn(self, u_fuzzy: float) -> None:
+    def gradients(self, u_fuzzy: float) -> tuple[list[float], list[list[float]]]:
+        """(dE/dWy, dE/dWz) of eqs. (8) and (9) at the last forward pass, error measured by u_fuzzy (one vehicle)."""
+        grad_output, hidden_factors = self._error_factors(u_fuzzy)
+        return grad_output, [[factor * z for z in self._inputs] for factor in hidden_factors]
+
+    def learn(self, u_fuzzy) -> None:
         """One gradient step, eqs. (6) and (7), then projection of every weight onto its bounds.
 
-        The gradients of :meth:`gradients`, computed term by term in the same order (so to the same
-        bits) inside the update loop: the step runs once per subsystem and control step, and building
-        the gradient lists first cost a third of it.
+        Both steps use the weights of the last forward pass, as eqs. (6)-(7) say. A zero teaching
+        signal changes no weight (every gradient is proportional to it): one vehicle then skips the
+        arithmetic.
         """
-        if self.learning_rate == 0.0:
+        if self.learning_rate == 0.0 or (not is_batch(u_fuzzy) and u_fuzzy == 0.0):
             return
-        alpha, limit = self.learning_rate, self.weight_limit
-        common = u_fuzzy * self.output_gain * (1.0 - self._output * self._output)
-        inputs, output_weights = self._inputs, self.output_weights
-        for j, (y, row) in enumerate(zip(self._hidden, self.hidden_weights)):
-            wy = output_weights[j]
-            hidden_factor = -0.25 * common * wy * (1.0 - y * y)     # dE/dWz[j][i] = hidden_factor * Z_i
-            for i, z in enumerate(inputs):
-                row[i] = min(limit, max(-limit, row[i] - alpha * (hidden_factor * z)))
-            output_weights[j] = min(limit, max(-limit, wy - alpha * (-0.5 * common * y)))
+        layers, alpha, limit = self.layers, self.learning_rate, self.weight_limit
+        output_factors, hidden_factors = self._error_factors(u_fuzzy)
+        self.hidden_weights = layers.outer_step(self.hidden_weights,
+                                                layers.elementwise(lambda f: alpha * f, hidden_factors),
+                                                self._inputs, limit)
+        self.output_weights = layers.step(self.output_weights,
+                                          layers.elementwise(lambda f: alpha * f, output_factors), limit)

@@ -60,17 +60,19 @@ CONTROL_REFERENCE = TopicSpec('control/reference', 'geometry_msgs/msg/PoseStampe
                               'controller -> tools: the reference each update used')
 CONTROL_DIAGNOSTICS = TopicSpec('control/diagnostics', 'std_msgs/msg/Float64MultiArray', LOCKSTEP,
                                 'controller -> tools: S, NN and fuzzy terms per subsystem')
+GROUND_TRUTH = TopicSpec('ground_truth/odom', 'nav_msgs/msg/Odometry', LOCKSTEP,
+                         'simulator -> tools: the true state, recorded when odom carries sensor noise')
 CLOCK = TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', QosSpec('reliable', 'volatile', 10), 'quad_sim -> all')
 TF = TopicSpec('/tf', 'tf2_msgs/msg/TFMessage', TF_QOS,
                'quad_sim -> tools: odom -> <namespace>/base_link of every vehicle, per odometry step')
 
 ALL_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, GOAL_POSE, CONTROL_WRENCH,
-              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, TF)
+              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, TF, GROUND_TRUTH)
 #: what a flight bag records by default
 RECORDED_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, CONTROL_WRENCH, CONTROL_REFERENCE,
                    CONTROL_DIAGNOSTICS, CLOCK, TF)
 #: the simulator's topics (the others are the controller's, the trajectory's and the tools')
-SIMULATOR_TOPICS = (ODOM, CLOCK, TF)
+SIMULATOR_TOPICS = (ODOM, CLOCK, TF, GROUND_TRUTH)
 
 
 def resolve(topic: TopicSpec, namespace: str) -> str:

@@ -3,11 +3,14 @@
 Convention (REP 103): world frame ``odom`` is ENU, body frame ``base_link`` is FLU. The attitude
 is the Z-Y-X Euler sequence of the paper's eq. (1): body-to-world R = Rz(psi) Ry(theta) Rx(phi),
 whose third column is the thrust direction used in eq. (1). Quaternions are (x, y, z, w), the
-order of ``geometry_msgs/Quaternion``. All functions take and return plain floats.
+order of ``geometry_msgs/Quaternion``. All functions take and return plain floats; the two rate
+conversions also take numpy arrays (one element per vehicle) through :mod:`quad_msgs_bridge.numeric`.
 """
 from __future__ import annotations
 
 import math
+
+from quad_msgs_bridge.numeric import SCALAR, namespace_for
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -65,8 +68,9 @@ def body_rates_from_euler_rates(euler: Vec3, euler_rates: Vec3) -> Vec3:
     """Exact body rates (p, q, r) [rad/s, body FLU] from Z-Y-X Euler rates [rad/s]."""
     phi, theta, _ = euler
     dphi, dtheta, dpsi = euler_rates
-    cf, sf = math.cos(phi), math.sin(phi)
-    ct, st = math.cos(theta), math.sin(theta)
+    xp = namespace_for(theta)
+    cf, sf = xp.cos(phi), xp.sin(phi)
+    ct, st = xp.cos(theta), xp.sin(theta)
     return (dphi - st * dpsi,
             cf * dtheta + sf * ct * dpsi,
             -sf * dtheta + cf * ct * dpsi)
@@ -75,16 +79,20 @@ def body_rates_from_euler_rates(euler: Vec3, euler_rates: Vec3) -> Vec3:
 def euler_rates_from_body_rates(euler: Vec3, body_rates: Vec3) -> Vec3:
     """Exact Z-Y-X Euler rates [rad/s] from body rates (p, q, r) [rad/s, body FLU].
 
-    Singular at theta = +-pi/2 (gimbal lock), where it raises ValueError.
+    Singular at theta = +-pi/2 (gimbal lock), where it raises ValueError for a single vehicle; in a
+    batch the rates of such a vehicle become NaN (the others are unaffected).
     """
     phi, theta, _ = euler
     p, q, r = body_rates
-    ct = math.cos(theta)
-    if abs(ct) < 1e-9:
+    xp = namespace_for(theta)
+    ct = xp.cos(theta)
+    locked = xp.abs(ct) < 1e-9
+    if xp is SCALAR and locked:
         raise ValueError(f'Euler rates are undefined at pitch {theta} rad (gimbal lock)')
-    cf, sf = math.cos(phi), math.sin(phi)
+    ct = xp.where(locked, math.nan, ct)
+    cf, sf = xp.cos(phi), xp.sin(phi)
     yaw_part = (q * sf + r * cf) / ct
-    return (p + yaw_part * math.sin(theta), q * cf - r * sf, yaw_part)
+    return (p + yaw_part * xp.sin(theta), q * cf - r * sf, yaw_part)
 
 
 def wrap_angle(angle: float) -> float:

@@ -1,8 +1,21 @@
 """One set of elementwise math for a single vehicle (plain floats) and a batch (numpy arrays).
 
-Equations are written once against a namespace ``xp`` with ``sin``, ``cos``, ``clip``, ``where``
-and ``signed_square``; :func:`namespace_for` picks the fast plain-float one for a single vehicle
-and the numpy one when the values are arrays of many vehicles.
+Equations are written once against a namespace ``xp``; :func:`namespace_for` picks the fast
+plain-float one for a single vehicle and the numpy one when the values are arrays with one
+element per vehicle. Both namespaces offer the same primitives with the same meaning:
+
+* ``sin cos atan atan2 tanh hypot sqrt exp expm1 abs floor``: as in :mod:`math`, elementwise;
+* ``minimum(a, b)``, ``maximum(a, b)``, ``clip(v, low, high)``, ``where(condition, a, b)``;
+* ``sign(v)``: -1, 0 or +1; ``signed_square(v)``: v |v|;
+* ``zeros_like(v)``: zero(s) of v's shape; ``copy(v)``: an independent copy of v;
+* ``take(table, index)``: ``table[index]`` for a whole-number ``index`` (a float or float array);
+* ``all_finite(values)``: whether every value of a sequence (of floats or arrays) is finite;
+* ``finite_each(values)``: per vehicle, whether all its values in the sequence are finite;
+* ``any(condition)``: whether the condition holds for any vehicle (a plain bool);
+* ``project(values, limit)``: the list ``values`` with each value clipped to [-limit, limit].
+
+A single vehicle runs on plain floats because numpy's per-call overhead (a microsecond) is far
+larger than the arithmetic of one vehicle; a batch pays that overhead once for every vehicle.
 """
 from __future__ import annotations
 
@@ -20,12 +33,48 @@ def _where(condition: bool, if_true: float, if_false: float) -> float:
     return if_true if condition else if_false
 
 
-SCALAR = SimpleNamespace(sin=math.sin, cos=math.cos, clip=_clip, where=_where,
-                         signed_square=lambda v: v * abs(v))
-BATCH = SimpleNamespace(sin=np.sin, cos=np.cos, clip=np.clip, where=np.where,
-                        signed_square=lambda v: v * np.abs(v))
+def _sign(value: float) -> float:
+    return 1.0 if value > 0.0 else -1.0 if value < 0.0 else 0.0
 
 
-def namespace_for(value) -> SimpleNamespace:
-    """SCALAR for a plain number, BATCH for a numpy array (one element per vehicle)."""
-    return BATCH if isinstance(value, np.ndarray) else SCALAR
+def _project(values: list, limit: float) -> list:
+    if -limit <= min(values) and max(values) <= limit:    # the common case: two C calls, no copy
+        return values
+    return [-limit if v < -limit else limit if v > limit else v for v in values]
+
+
+def _batch_all_finite(values) -> bool:
+    return all(bool(np.isfinite(v).all()) for v in values)
+
+
+SCALAR = SimpleNamespace(
+    sin=math.sin, cos=math.cos, atan=math.atan, atan2=math.atan2, tanh=math.tanh, hypot=math.hypot,
+    sqrt=math.sqrt, exp=math.exp, expm1=math.expm1, abs=abs, floor=math.floor, minimum=min, maximum=max,
+    clip=_clip, where=_where, sign=_sign, signed_square=lambda v: v * abs(v),
+    take=lambda table, index: table[int(index)],
+    all_finite=lambda values: all(map(math.isfinite, values)), project=_project,
+    finite_each=lambda values: all(map(math.isfinite, values)), any=bool,
+    zeros_like=lambda v: 0.0, copy=lambda v: v)
+BATCH = SimpleNamespace(
+    sin=np.sin, cos=np.cos, atan=np.arctan, atan2=np.arctan2, tanh=np.tanh, hypot=np.hypot,
+    sqrt=np.sqrt, exp=np.exp, expm1=np.expm1, abs=np.abs, floor=np.floor, minimum=np.minimum, maximum=np.maximum,
+    clip=lambda v, low, high: np.minimum(np.maximum(v, low), high), where=np.where, sign=np.sign,
+    signed_square=lambda v: v * np.abs(v),
+    take=lambda table, index: np.asarray(table)[np.asarray(index).astype(np.intp)],
+    all_finite=_batch_all_finite,
+    finite_each=lambda values: np.logical_and.reduce([np.isfinite(v) for v in values]),
+    any=lambda condition: bool(np.any(condition)),
+    project=lambda values, limit: [np.minimum(np.maximum(v, -limit), limit) for v in values],
+    zeros_like=np.zeros_like, copy=np.copy)
+
+
+def namespace_for(value, *more) -> SimpleNamespace:
+    """SCALAR when every value is a plain number, BATCH when any is a numpy array (one element per vehicle)."""
+    if isinstance(value, np.ndarray) or (more and any(isinstance(v, np.ndarray) for v in more)):
+        return BATCH
+    return SCALAR
+
+
+def is_batch(value) -> bool:
+    """Whether ``value`` holds a batch of vehicles (a numpy array) rather than one vehicle."""
+    return isinstance(value, np.ndarray)

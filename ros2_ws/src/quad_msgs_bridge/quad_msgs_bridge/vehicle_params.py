@@ -1,20 +1,37 @@
 """Vehicle description (paper Table I) and section IV disturbances, loaded from one YAML file.
 
-The same file describes the simulated vehicle (truth) and the controllers' nominal model, so
-both sides of the ``rotor_forces`` contract agree on geometry and rotor limits. Every value is
-validated on load: a missing, unknown, non-finite or out-of-range entry raises
-:class:`ParameterError` naming the parameter and its valid range.
+The same schema describes the simulated vehicle (the truth) and a controller's nominal model, so
+both sides of the ``rotor_forces`` contract agree on geometry and rotor limits; a robustness
+campaign flies a perturbed true vehicle against the nominal one. Beyond Table I the description
+has optional entries that only the true vehicle needs (a centre-of-gravity offset, per-rotor thrust
+and reaction-torque factors, a per-rotor efficiency loss and a wind drag coefficient); left out,
+they take values that change nothing. Every value is validated: a missing, unknown, non-finite or
+out-of-range entry raises :class:`ParameterError` naming the parameter and its valid range.
+
+A :class:`VehicleParams` holds plain floats for one vehicle, or numpy arrays of shape (B,), one
+element per vehicle, for a batch (see :meth:`VehicleParams.stack`); arrays are checked element by
+element and an error names the vehicle index.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
+import numpy as np
 import yaml
 
 DEFAULT_VEHICLE_FILE = Path(__file__).resolve().parent / 'config' / 'vehicle.yaml'
+
+#: [N s/m] Linear drag of the whole vehicle against the air, used when a wind model is on. RotorPy's
+#: AscTec Hummingbird (0.500 kg; rotorpy/vehicles/hummingbird_params.py) has the rotor drag
+#: coefficient k_d = 1.19e-4 kg/rad per rotor and the thrust coefficient k_eta = 5.57e-6 N s^2; at
+#: hover each rotor turns at sqrt(m g / (4 k_eta)) = 469 rad/s, so the four rotors give
+#: 4 k_d 469 = 0.223 N s/m, 0.447 (m/s^2)/(m/s) mass-normalised. Scaled to the 0.486 kg vehicle of
+#: this stack: 0.447 x 0.486 = 0.217 N s/m (about 390 times the paper's Kfx). The linear law
+#: F = c (w_air - v) is the rotor-drag model of Faessler, Franchi and Scaramuzza, IEEE RA-L 3(2), 2018.
+DEFAULT_WIND_DRAG = 0.217
 
 
 class ParameterError(ValueError):
@@ -22,32 +39,106 @@ class ParameterError(ValueError):
 
 
 def check_number(name: str, value: Any, low: float = -math.inf, high: float = math.inf,
-                 low_inclusive: bool = True) -> float:
+                 low_inclusive: bool = True, high_inclusive: bool = True) -> float:
     """Return ``value`` as a float, or raise ParameterError if it is not a finite number in range."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ParameterError(f'{name}: expected a number, got {value!r}')
     value = float(value)
+    closed_low, closed_high = low_inclusive and math.isfinite(low), high_inclusive and math.isfinite(high)
+    interval = f'{"[" if closed_low else "("}{low}, {high}{"]" if closed_high else ")"}'
+    if not math.isfinite(value):
+        bounded = math.isfinite(low) or math.isfinite(high)
+        raise ParameterError(f'{name}: must be finite, got {value!r}' + (f' (valid range {interval})' if bounded else ''))
     below = value < low if low_inclusive else value <= low
-    if not math.isfinite(value) or below or value > high:
-        bracket = '[' if low_inclusive else '('
-        raise ParameterError(f'{name}: {value!r} is outside the valid range {bracket}{low}, {high}]')
+    above = value > high if high_inclusive else value >= high
+    if below or above:
+        raise ParameterError(f'{name}: {value!r} is outside the valid range {interval}')
     return value
 
 
-def _check_keys(section: str, given: Mapping[str, Any], expected: list[str]) -> None:
+def check_values(name: str, value: Any, low: float = -math.inf, high: float = math.inf,
+                 low_inclusive: bool = True, high_inclusive: bool = True):
+    """:func:`check_number` for one vehicle; for a batch, a 1-D numpy array checked element by element.
+
+    Returns a float, or a float64 array of shape (B,); the error names the first bad vehicle.
+    """
+    if not isinstance(value, np.ndarray):
+        return check_number(name, value, low, high, low_inclusive, high_inclusive)
+    if value.ndim != 1 or value.size == 0 or value.dtype.kind not in 'iuf':
+        raise ParameterError(f'{name}: expected a number or a 1-D numeric array with one element per vehicle, '
+                             f'got an array of shape {value.shape} and dtype {value.dtype}')
+    values = value.astype(float)
+    below = values < low if low_inclusive else values <= low
+    above = values > high if high_inclusive else values >= high
+    bad = ~np.isfinite(values) | below | above
+    if bad.any():
+        vehicle = int(np.argmax(bad))
+        check_number(f'{name} (vehicle {vehicle})', float(values[vehicle]), low, high, low_inclusive, high_inclusive)
+    return values
+
+
+def _check_keys(section: str, given: Mapping[str, Any], expected: list[str], optional: Sequence[str] = ()) -> None:
     if not isinstance(given, Mapping):
         raise ParameterError(f'{section}: expected a mapping, got {type(given).__name__}')
     missing = [k for k in expected if k not in given]
     if missing:
         raise ParameterError(f'{section}.{missing[0]}: missing (required keys: {", ".join(expected)})')
-    unknown = [k for k in given if k not in expected]
+    unknown = [k for k in given if k not in expected and k not in optional]
     if unknown:
-        raise ParameterError(f'{section}.{unknown[0]}: unknown parameter (valid keys: {", ".join(expected)})')
+        valid = ', '.join([*expected, *optional])
+        raise ParameterError(f'{section}.{unknown[0]}: unknown parameter (valid keys: {valid})')
+
+
+_POSITIVE = (0.0, math.inf, False, True)
+_NON_NEGATIVE = (0.0, math.inf, True, True)
+_ANY = (-math.inf, math.inf, True, True)
+_FRACTION_BELOW_ONE = (0.0, 1.0, True, False)
+
+#: Valid range (low, high, low inclusive, high inclusive) of each field, per element for the tuples.
+_RANGES = {
+    'm': _POSITIVE, 'd': _POSITIVE, 'Ix': _POSITIVE, 'Iy': _POSITIVE, 'Iz': _POSITIVE, 'Kp': _POSITIVE,
+    'Kd': _NON_NEGATIVE, 'Kfx': _NON_NEGATIVE, 'Kfy': _NON_NEGATIVE, 'Kfz': _NON_NEGATIVE,
+    'Kfphi': _NON_NEGATIVE, 'Kftheta': _NON_NEGATIVE, 'Kfpsi': _NON_NEGATIVE, 'g': _POSITIVE,
+    'F_min': _NON_NEGATIVE, 'F_max': _NON_NEGATIVE,
+    'cog_offset': _ANY, 'rotor_thrust_factors': _POSITIVE, 'rotor_drag_factors': _POSITIVE,
+    'rotor_efficiency_loss': _FRACTION_BELOW_ONE, 'wind_drag': _NON_NEGATIVE,
+}
+#: Fields holding one value per body axis (3) or per rotor (4), in the rotor order of the mixer.
+_VECTOR_LENGTHS = {'cog_offset': 3, 'rotor_thrust_factors': 4, 'rotor_drag_factors': 4, 'rotor_efficiency_loss': 4}
+#: Keys a vehicle file may leave out (their defaults leave the vehicle unperturbed).
+_OPTIONAL = ('cog_offset', 'rotor_thrust_factors', 'rotor_drag_factors', 'rotor_efficiency_loss', 'wind_drag')
+
+
+def _pick(value, vehicle: int | None):
+    """One vehicle's element of a float or per-vehicle array (the value itself for a float)."""
+    return value if vehicle is None or not isinstance(value, np.ndarray) else float(value[vehicle])
+
+
+def _require(ok, message: Callable[[int | None], str]) -> None:
+    """Raise ParameterError(message) unless ``ok`` holds (for a batch: for every vehicle; the first
+    vehicle where it fails is passed to ``message`` and named)."""
+    if isinstance(ok, np.ndarray):
+        if not ok.all():
+            vehicle = int(np.argmin(ok))
+            raise ParameterError(f'{message(vehicle)} (vehicle {vehicle})')
+    elif not ok:
+        raise ParameterError(message(None))
 
 
 @dataclass(frozen=True)
 class VehicleParams:
-    """Physical parameters of paper Table I plus rotor limits, all in SI units."""
+    """Physical parameters of paper Table I, rotor limits and true-vehicle perturbations, in SI units.
+
+    Rotor model of the true vehicle: a rotor speed controller realises the commanded thrust F_i,
+    clipped to [F_min, F_max], with the Kp of this description (w_i^2 = F_i / Kp). The rotor then
+    gives the thrust f_i (1 - l_i) F_i and the reaction torque g_i (1 - l_i) (Kd / Kp) F_i, with
+    f_i = ``rotor_thrust_factors[i]`` (its own Kp_i = f_i Kp), g_i = ``rotor_drag_factors[i]``
+    (Kd_i = g_i Kd) and l_i = ``rotor_efficiency_loss[i]`` (the motor reaches only (1 - l_i) of the
+    commanded w_i^2, so thrust and torque both shrink). The thrust acts through the geometric
+    centre; with the centre of gravity at ``cog_offset`` = (c_x, c_y, c_z) from it, the moment
+    about the centre of gravity is sum (r_i - c) x (0, 0, T_i), i.e. roll d U2 - c_y U1 and pitch
+    d U3 + c_x U1 (c_z drops out: every thrust is parallel to body z).
+    """
 
     m: float        #: [kg] total mass
     d: float        #: [m] rotor-to-centre distance
@@ -65,6 +156,49 @@ class VehicleParams:
     g: float        #: [m/s^2] gravity
     F_min: float    #: [N] smallest rotor thrust
     F_max: float    #: [N] largest rotor thrust
+    cog_offset: tuple = (0.0, 0.0, 0.0)                  #: [m, body FLU] centre of gravity from the geometric centre
+    rotor_thrust_factors: tuple = (1.0, 1.0, 1.0, 1.0)   #: [-] Kp_i / Kp of rotors F1..F4
+    rotor_drag_factors: tuple = (1.0, 1.0, 1.0, 1.0)     #: [-] Kd_i / Kd of rotors F1..F4
+    rotor_efficiency_loss: tuple = (0.0, 0.0, 0.0, 0.0)  #: [-] in [0, 1): lost fraction of w_i^2 of F1..F4
+    wind_drag: float = DEFAULT_WIND_DRAG                 #: [N s/m] drag against the air when wind is on
+
+    def __post_init__(self):
+        """Check every value (element by element for a batch) and store floats, float arrays and tuples."""
+        sizes = {}
+        for name, (low, high, low_inclusive, high_inclusive) in _RANGES.items():
+            value = getattr(self, name)
+            if name in _VECTOR_LENGTHS:
+                length = _VECTOR_LENGTHS[name]
+                if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence) or len(value) != length:
+                    raise ParameterError(f'vehicle.{name}: expected a list of {length} values, got {value!r}')
+                checked = tuple(check_values(f'vehicle.{name}[{i}]', v, low, high, low_inclusive, high_inclusive)
+                                for i, v in enumerate(value))
+            else:
+                checked = check_values(f'vehicle.{name}', value, low, high, low_inclusive, high_inclusive)
+            for element in checked if name in _VECTOR_LENGTHS else (checked,):
+                if isinstance(element, np.ndarray):
+                    sizes[name] = element.size
+            object.__setattr__(self, name, checked)
+        if len(set(sizes.values())) > 1:
+            first = next(iter(sizes))
+            other = next(name for name, size in sizes.items() if size != sizes[first])
+            raise ParameterError(f'vehicle.{other}: {sizes[other]} vehicles, but vehicle.{first} has {sizes[first]}')
+        self._check_limits()
+
+    def _check_limits(self) -> None:
+        weight = self.m * self.g
+        _require(self.F_max > self.F_min,
+                 lambda i: f'vehicle.F_max: {_pick(self.F_max, i)} must exceed F_min = {_pick(self.F_min, i)}')
+        _require(4.0 * self.F_max > weight,
+                 lambda i: f'vehicle.F_max: {_pick(self.F_max, i)} N cannot hover the vehicle; valid range '
+                           f'({_pick(weight, i) / 4.0}, inf)')
+        _require(4.0 * self.F_min < weight,
+                 lambda i: f'vehicle.F_min: {_pick(self.F_min, i)} N cannot descend; valid range '
+                           f'[0, {_pick(weight, i) / 4.0})')
+        for axis, offset in zip('xyz', self.cog_offset):
+            _require(abs(offset) < self.d,
+                     lambda i: f'vehicle.cog_offset: {axis} = {_pick(offset, i)} m is not within the arm length, '
+                               f'valid range (-{_pick(self.d, i)}, {_pick(self.d, i)})')
 
     @property
     def yaw_coefficient(self) -> float:
@@ -78,26 +212,24 @@ class VehicleParams:
 
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> 'VehicleParams':
+        """The description in a YAML/JSON mapping: Table I keys required, the perturbation keys optional."""
         names = [f.name for f in fields(cls)]
-        _check_keys('vehicle', values, names)
-        positive = {'m', 'd', 'Ix', 'Iy', 'Iz', 'Kp', 'g'}
-        checked = {}
-        for name in names:
-            if name in positive:
-                checked[name] = check_number(f'vehicle.{name}', values[name], 0.0, low_inclusive=False)
-            else:
-                checked[name] = check_number(f'vehicle.{name}', values[name], 0.0)
-        if checked['F_max'] <= checked['F_min']:
-            raise ParameterError(f'vehicle.F_max: {checked["F_max"]} must exceed F_min = {checked["F_min"]}')
-        if 4.0 * checked['F_max'] <= checked['m'] * checked['g']:
-            raise ParameterError(
-                f'vehicle.F_max: {checked["F_max"]} N cannot hover the vehicle; valid range '
-                f'({checked["m"] * checked["g"] / 4.0}, inf)')
-        if checked['F_min'] * 4.0 >= checked['m'] * checked['g']:
-            raise ParameterError(
-                f'vehicle.F_min: {checked["F_min"]} N cannot descend; valid range '
-                f'[0, {checked["m"] * checked["g"] / 4.0})')
-        return cls(**checked)
+        _check_keys('vehicle', values, [n for n in names if n not in _OPTIONAL], _OPTIONAL)
+        return cls(**{name: values[name] for name in names if name in values})
+
+    @classmethod
+    def stack(cls, vehicles: Sequence['VehicleParams']) -> 'VehicleParams':
+        """One batch description of single vehicles: every value an array, one element per vehicle, in order."""
+        vehicles = list(vehicles)
+        if not vehicles:
+            raise ParameterError('vehicles: a batch needs at least one vehicle')
+
+        def column(name: str, index: int | None = None) -> np.ndarray:
+            return np.array([getattr(v, name) if index is None else getattr(v, name)[index] for v in vehicles],
+                            dtype=float)
+
+        return cls(**{name: tuple(column(name, i) for i in range(_VECTOR_LENGTHS[name]))
+                      if name in _VECTOR_LENGTHS else column(name) for name in _RANGES})
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,8 @@ from typing import Sequence
 
 from quad_msgs_bridge.bag.writer import BagWriter
 from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, DEFAULT_NAMESPACE,
-                                       ODOM, ODOM_FRAME, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, TF,
-                                       TopicSpec, base_frame, resolve)
+                                       GROUND_TRUTH, ODOM, ODOM_FRAME, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES,
+                                       SETPOINTS, TF, TopicSpec, base_frame, resolve)
 from quad_msgs_bridge.conversions import path_msg, rosbags_kit, setpoints_msg
 from quad_msgs_bridge.fast_cdr import (clock_encoder, diagnostics_encoder, odometry_encoder, pose_stamped_encoder,
                                        rotor_forces_encoder, tf_encoder, wrench_encoder)
@@ -38,6 +38,11 @@ def select_topics(names: Sequence[str] | None) -> tuple[TopicSpec, ...]:
     if unknown:
         raise ParameterError(f'topics: {unknown[0]!r} is not a recorded contract topic (valid: {", ".join(by_name)})')
     return tuple(by_name[name] for name in dict.fromkeys(names))
+
+
+def disturbances_label(enabled: bool) -> str:
+    """The bag's custom data ``disturbances`` of a flight (words a ROS string parameter keeps as a string)."""
+    return 'enabled' if enabled else 'disabled'
 
 
 def flight_custom_data(params: VehicleParams, settle_time: float, **info) -> dict[str, str]:
@@ -61,6 +66,7 @@ class FlightBag:
         self._wrench, self._reference, self._diagnostics = name(CONTROL_WRENCH), name(CONTROL_REFERENCE), \
             name(CONTROL_DIAGNOSTICS)
         self._setpoints, self._path, self._tf = name(SETPOINTS), name(REFERENCE_PATH), name(TF)
+        self._truth = name(GROUND_TRUTH)
         self._base_frame = base_frame(namespace)
         self._encode_clock = clock_encoder()
         self._encode_odometry = odometry_encoder(ODOM_FRAME, self._base_frame)
@@ -91,9 +97,11 @@ class FlightBag:
 
     def record_step(self, odometry: OdometrySample, forces: Sequence[float], controls: Sequence[float],
                     reference_position: Sequence[float], reference_yaw: float, surfaces: Sequence[float],
-                    equivalent: Sequence[float], corrective: Sequence[float]) -> None:
+                    equivalent: Sequence[float], corrective: Sequence[float],
+                    truth: OdometrySample | None = None) -> None:
         """One control step: the odometry answered, the thrusts [N] and U1..U4 sent, the reference
-        [m, rad] used and the per-subsystem sliding surfaces, NN and fuzzy terms."""
+        [m, rad] used and the per-subsystem sliding surfaces, NN and fuzzy terms; with ``truth``
+        (the true state when the odometry carries sensor noise) also ``ground_truth/odom``."""
         stamp = nanoseconds(odometry.stamp)
         sec, nanosec = divmod(stamp, NANOSECONDS_PER_SECOND)
         write = self.writer.write_serialized
@@ -101,6 +109,8 @@ class FlightBag:
             write(self._clock, self._encode_clock(sec, nanosec), stamp)
         if self._odom:
             write(self._odom, self._encode_odometry(sec, nanosec, odometry), stamp)
+        if self._truth and truth is not None:
+            write(self._truth, self._encode_odometry(sec, nanosec, truth), stamp)
         if self._tf:
             write(self._tf, self._encode_tf(sec, nanosec, (odometry,)), stamp)
         if self._forces:

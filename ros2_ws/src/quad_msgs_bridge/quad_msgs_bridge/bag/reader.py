@@ -33,6 +33,45 @@ class BagReadError(ValueError):
     """The path is not a readable bag; the message says what is wrong with it."""
 
 
+EXPECTED_BAG = 'expected a rosbag2 bag directory (holding metadata.yaml) or an MCAP file'
+
+
+def describe_file(path: Path) -> str:
+    """What the file at ``path`` looks like, for a message: 'an empty file', 'a text file (it begins ...)', ..."""
+    size = path.stat().st_size
+    with path.open('rb') as stream:
+        head = stream.read(512)
+    if not head:
+        return 'an empty file (0 bytes)'
+    if head.startswith(MAGIC):
+        return f'an MCAP file of {size} bytes'
+    if MAGIC.startswith(head):
+        return f'a file of {size} bytes, cut off within the MCAP magic'
+    try:
+        text = head.decode('utf-8')
+    except UnicodeDecodeError as error:   # a multi-byte character cut at the end of the 512 bytes is still text
+        text = head[:error.start].decode('utf-8') if error.start >= len(head) - 3 else None
+    if text is not None and '\0' not in text:
+        first_line = text.strip().splitlines()[0] if text.strip() else ''
+        return f'a text file of {size} bytes (it begins {first_line[:40]!r})'
+    return f'a binary file of {size} bytes without the MCAP magic'
+
+
+def check_bag_path(bag: Path) -> None:
+    """Raise BagReadError saying what ``bag`` is unless it is a rosbag2 bag directory or an MCAP file."""
+    if not bag.exists():
+        raise BagReadError(f'{bag}: no such file or directory; {EXPECTED_BAG}')
+    if bag.is_dir():
+        if (bag / METADATA_FILE).is_file() or any(bag.glob('*.mcap')):
+            return
+        raise BagReadError(f'{bag}: a directory without {METADATA_FILE} or .mcap file, not a bag; {EXPECTED_BAG}')
+    if bag.name == METADATA_FILE and (bag.parent / METADATA_FILE).is_file():
+        raise BagReadError(f'{bag}: the metadata file of a bag, not the bag; give its directory: {bag.parent}')
+    description = describe_file(bag)
+    if not description.startswith('an MCAP file'):
+        raise BagReadError(f'{bag}: {description}, not a bag; {EXPECTED_BAG}')
+
+
 def mcap_file(bag: str | Path) -> Path:
     """The MCAP file of a bag directory (or the file itself if ``bag`` is one)."""
     bag = Path(bag)

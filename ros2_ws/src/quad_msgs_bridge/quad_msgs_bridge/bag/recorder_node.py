@@ -43,7 +43,8 @@ class RecorderNode(Node):
         topic_names = declare(self, 'topics', [t.name for t in RECORDED_TOPICS], 'contract topics to record')
         queue_size = declare(self, 'queue_size', 100000, 'messages buffered for the writer thread', (1, 10 ** 7))
         overwrite = declare(self, 'overwrite', False, 'replace an existing bag at the same path')
-        labels = {key: declare(self, key, '', f'{key} stored in the bag metadata') for key in ('controller', 'scenario')}
+        labels = {key: declare(self, key, '', f'{key} stored in the bag metadata')
+                  for key in ('controller', 'scenario', 'disturbances')}
         seed = declare(self, 'seed', 0, 'NN seed of the flight, stored in the bag metadata', (0, 2 ** 31 - 1))
         settle_time = declare(self, 'settle_time', 5.0, 'metrics settling window stored in the bag [s]', (0.0, 1e6))
         vehicle_file = declare(self, 'vehicle_file', '', 'vehicle YAML of the flight; empty: the packaged one')

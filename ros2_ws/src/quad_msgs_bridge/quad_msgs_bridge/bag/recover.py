@@ -1,9 +1,8 @@
-"""``recover BAG``: finalize a bag whose recording was killed (SIGKILL, power loss, full disk).
+"""recover BAG: finalize a bag whose recording was killed (SIGKILL, power loss, full disk).
 
-The readable prefix of the MCAP file (every complete, CRC-valid chunk; see
-:class:`~quad_msgs_bridge.bag.reader.McapPrefix`) is rewritten into a finalized file with a summary,
-which then replaces the original; a bag directory gets a ``metadata.yaml`` with the true counts.
-Memory stays within two chunks (the one being read and the one being written).
+The readable prefix of the MCAP file (every complete, CRC-valid chunk) is rewritten into a finalized
+file with a summary, which then replaces the original; a bag directory gets a metadata.yaml with the
+true counts. Memory stays within two chunks (the one being read and the one being written).
 """
 from __future__ import annotations
 
@@ -16,7 +15,7 @@ from pathlib import Path
 from mcap.records import Channel, Header, Message, Metadata, Schema
 
 from quad_msgs_bridge.bag.metadata import CUSTOM_DATA_RECORD, topic_from_channel
-from quad_msgs_bridge.bag.reader import BagReadError, McapPrefix, is_finalized, mcap_file
+from quad_msgs_bridge.bag.reader import BagReadError, McapPrefix, describe_file, is_finalized, mcap_file
 from quad_msgs_bridge.bag.writer import finish_bag
 from quad_msgs_bridge.bag.mcap_file import McapFileWriter
 
@@ -36,6 +35,10 @@ def recover(bag: str | Path) -> Recovery:
     """
     bag = Path(bag)
     target = mcap_file(bag)
+    description = describe_file(target)
+    if not description.startswith('an MCAP file'):
+        raise BagReadError(f'{target}: {description}, not an MCAP file; recover finalizes the MCAP file '
+                           '(or the bag directory) of a killed recording')
     if is_finalized(target):
         raise BagReadError(f'{target}: already finalized, nothing to recover')
     source = target.with_name(target.name + '.killed')
@@ -88,9 +91,9 @@ def recover_main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         result = recover(args.bag)
-    except (BagReadError, OSError) as error:
+    except (BagReadError, OSError) as error:   # BagReadError: not a recoverable bag (wrong input)
         print(f'error: {error}', file=sys.stderr)
-        return 1
+        return 2 if isinstance(error, BagReadError) else 1
     print(f'recovered {result.messages} messages into {result.path}'
           + (f'; dropped {result.dropped_bytes} bytes of an incomplete chunk ({result.stop_reason})'
              if result.dropped_bytes else ''))

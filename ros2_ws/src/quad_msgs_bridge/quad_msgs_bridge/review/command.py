@@ -1,13 +1,13 @@
-"""``review BAG [--compare BAG2 ...]``: a recorded flight as numbers and pictures.
+"""review BAG [--compare BAG2 ...]: a recorded flight as numbers and pictures.
 
-Reads any bag with the contract topics (see :mod:`quad_msgs_bridge.review.flight_from_bag`), computes the
-metrics of ``summary.json`` with the same function as the live summary
-(:func:`quad_msgs_bridge.review.metrics.flight_metrics`), prints them, and writes into the output folder
-``review.json``, the plots (``plots/*.png``, needs matplotlib) and a one-page report
-(``report.html`` and ``report.md``). With ``--compare`` the flights are overlaid in every plot and
-tabulated side by side.
+Reads any rosbag2 bag (MCAP or sqlite3 storage, or a lone .mcap file) with the contract topics,
+computes the metrics of summary.json with the same function as the live summary, prints them, and
+writes into the output folder review.json, the plots (plots/*.png, needs matplotlib) and a one-page
+report (report.html and report.md) that says what was flown and what each metric means. With
+--compare the flights are overlaid in every plot and tabulated side by side.
 
-Run as ``ros2 run quad_msgs_bridge review BAG`` or, without ROS, ``python3 -m quad_msgs_bridge.review.command BAG``.
+Run as `ros2 run quad_msgs_bridge review BAG`, `python3 run_stack.py review BAG` or, without ROS,
+`python3 -m quad_msgs_bridge.review BAG`.
 """
 from __future__ import annotations
 
@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import Sequence
 
 from quad_msgs_bridge.review.flight_from_bag import BagFlight, read_flight
-from quad_msgs_bridge.review.metrics import flight_metrics
 from quad_msgs_bridge.review.plots import plot_flights
 from quad_msgs_bridge.review.report import text_table, write_html, write_markdown
 
@@ -46,12 +45,21 @@ def review_bags(bags: Sequence[str | Path], out_dir: str | Path, *, namespace: s
                 vehicle_file: str | Path | None = None, settle_time: float | None = None,
                 plots: bool = True) -> Review:
     """Metrics, plots and report of ``bags`` (several: compared) into ``out_dir``."""
-    out_dir = Path(out_dir)
     flights = [read_flight(bag, namespace=namespace, vehicle_file=vehicle_file, settle_time=settle_time)
                for bag in bags]
+    return review_flights(flights, out_dir, plots=plots)
+
+
+def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: bool = True) -> Review:
+    """Metrics, plots and report of ``flights`` (several: compared) into ``out_dir``.
+
+    A flight just flown is reviewed from its record in memory, a recorded one from its bag
+    (:func:`review_bags`): the same metrics either way.
+    """
+    out_dir = Path(out_dir)
     for flight, label in zip(flights, _unique_labels(flights)):
         flight.label = label
-    metrics = [flight_metrics(f.record, f.settle_time, f.params.F_min, f.params.F_max) for f in flights]
+    metrics = [flight.metrics() for flight in flights]
     notes = [f'{f.label}: {warning}' for f in flights for warning in f.warnings]
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / 'review.json').write_text(json.dumps(
@@ -62,10 +70,9 @@ def review_bags(bags: Sequence[str | Path], out_dir: str | Path, *, namespace: s
             plot_paths = plot_flights(flights, out_dir / 'plots')
         except ImportError:
             notes.append(PLOT_HINT)
-    named = [(f.label, f.path) for f in flights]
-    write_markdown(out_dir / 'report.md', named, metrics, plot_paths, notes)
-    report = write_html(out_dir / 'report.html', named, metrics, plot_paths, notes)
-    return Review(flights, metrics, out_dir, report, plot_paths, notes)
+    write_markdown(out_dir / 'report.md', flights, metrics, plot_paths, notes)
+    report = write_html(out_dir / 'report.html', flights, metrics, plot_paths, notes)
+    return Review(list(flights), metrics, out_dir, report, plot_paths, notes)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -78,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--vehicle', type=Path, default=None,
                         help='vehicle YAML for bags without vehicle parameters (default: the packaged one)')
     parser.add_argument('--settle-time', type=float, default=None,
-                        help='metrics ignore the first S seconds (default: as recorded, else 5)')
+                        help='metrics ignore the first S seconds (default: as recorded, else 5, or half of a '
+                             'flight shorter than 10 s)')
     parser.add_argument('--namespace', default=None, help='vehicle namespace of the topics (default: found)')
     parser.add_argument('--no-plots', action='store_true', help='metrics and report only')
     args = parser.parse_args(argv)
@@ -86,9 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     try:
         result = review_bags([args.bag, *args.compare], out_dir, namespace=args.namespace,
                              vehicle_file=args.vehicle, settle_time=args.settle_time, plots=not args.no_plots)
-    except (ValueError, OSError) as error:   # BagReadError, ParameterError, too short a flight
+    except (ValueError, OSError) as error:   # ValueError (BagReadError, ParameterError, too short): wrong input
         print(f'error: {error}', file=sys.stderr)
-        return 1
+        return 2 if isinstance(error, ValueError) else 1
     print(text_table([f.label for f in result.flights], result.metrics))
     for note in result.notes:
         print(f'note: {note}')

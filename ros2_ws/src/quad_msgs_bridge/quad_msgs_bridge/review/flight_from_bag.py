@@ -14,33 +14,41 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rosbags.highlevel import AnyReader
+from rosbags.highlevel import AnyReader, AnyReaderError
 
-from quad_msgs_bridge.bag.reader import BagReadError, is_finalized, mcap_file, read_custom_data
+from quad_msgs_bridge.bag.reader import BagReadError, check_bag_path, is_finalized, mcap_file, read_custom_data
 from quad_msgs_bridge.bag.writer import jazzy_typestore
-from quad_msgs_bridge.contract import CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM, ROTOR_FORCES, TopicSpec, resolve
+from quad_msgs_bridge.contract import (ALL_TOPICS, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GROUND_TRUTH,
+                                       ODOM, ROTOR_FORCES, TopicSpec, resolve)
 from quad_msgs_bridge.conversions import (controls_from_wrench, diagnostics_from_msg, odometry_from_msg, pose_from_msg,
                           rotor_forces_from_msg)
-from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
+from quad_msgs_bridge.review.metrics import (FlightRecord, FlightRecorder, default_settle_time, flight_metrics,
+                                             has_fuzzy_term)
 from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
 #: the topics a flight record needs
 NEEDED_TOPICS = (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS)
-DEFAULT_SETTLE_TIME = 5.0
+#: read when present: the true state of a flight whose odometry carries sensor noise
+OPTIONAL_TOPICS = (GROUND_TRUTH,)
 
 
 @dataclass
 class BagFlight:
-    """A flight read from a bag, with what its metrics need."""
+    """A flight with what its review needs: read from a bag, or just flown (its record kept in memory)."""
 
-    path: Path
+    path: Path                    #: the bag of the flight
     label: str                    #: controller name (custom data) or the bag's name
     record: FlightRecord
     params: VehicleParams         #: from the bag's custom data, else the vehicle file
     settle_time: float            #: [s]
-    custom_data: dict
+    custom_data: dict             #: the bag's custom data (controller, scenario, disturbances, ...)
     warnings: list = field(default_factory=list)
+
+    def metrics(self) -> dict:
+        """The flight's metrics (:func:`~quad_msgs_bridge.review.metrics.flight_metrics`), as ``summary.json``."""
+        return flight_metrics(self.record, self.settle_time, self.params.F_min, self.params.F_max,
+                              fuzzy_term=has_fuzzy_term(self.custom_data.get('controller')))
 
 
 def _stamp_ns(msg) -> int:
@@ -54,7 +62,9 @@ def _find_connection(connections, spec: TopicSpec, namespace: str | None):
         matches = [c for c in typed if c.topic == resolve(spec, namespace)]
     else:
         suffix = spec.name if spec.name.startswith('/') else '/' + spec.name
-        matches = [c for c in typed if c.topic.endswith(suffix)]
+        longer = [other.name for other in ALL_TOPICS if other.name != spec.name and other.name.endswith(suffix)]
+        matches = [c for c in typed if c.topic.endswith(suffix)
+                   and not any(c.topic.endswith('/' + name) for name in longer)]
     if len({c.topic for c in matches}) > 1:
         raise BagReadError(f'several {spec.type} topics end in {spec.name!r}: '
                            f'{sorted({c.topic for c in matches})}; choose one with --namespace')
@@ -82,10 +92,18 @@ class _Topics:
     forces: list = field(default_factory=list)        #: each rotor_forces
     diagnostics: list = field(default_factory=list)   #: each control/diagnostics
     odometry: dict = field(default_factory=dict)      #: stamp [ns] -> OdometrySample
+    truth: dict = field(default_factory=dict)         #: stamp [ns] -> OdometrySample of ground_truth/odom
     references: dict = field(default_factory=dict)    #: stamp [ns] -> (position, yaw)
 
 
 def _read_topics(bag: Path, namespace: str | None, arm_length: float) -> _Topics:
+    try:
+        return _read_contract_topics(bag, namespace, arm_length)
+    except AnyReaderError as error:
+        raise BagReadError(f'{bag}: not readable as a bag: {error}') from error
+
+
+def _read_contract_topics(bag: Path, namespace: str | None, arm_length: float) -> _Topics:
     topics = _Topics()
     with AnyReader([bag], default_typestore=jazzy_typestore()) as reader:
         found = {spec: _find_connection(reader.connections, spec, namespace) for spec in NEEDED_TOPICS}
@@ -93,12 +111,15 @@ def _read_topics(bag: Path, namespace: str | None, arm_length: float) -> _Topics
         if missing:
             raise BagReadError(f'{bag}: no {", ".join(missing)} topic (has: '
                                f'{", ".join(sorted({c.topic for c in reader.connections}))})')
+        found.update({spec: _find_connection(reader.connections, spec, namespace) for spec in OPTIONAL_TOPICS})
         role = {c.id: spec for spec, connections in found.items() for c in connections}
         for connection, _, raw in reader.messages(connections=[c for cs in found.values() for c in cs]):
             msg = reader.deserialize(raw, connection.msgtype)
             spec = role[connection.id]
             if spec is ODOM:
                 topics.odometry[_stamp_ns(msg)] = odometry_from_msg(msg)
+            elif spec is GROUND_TRUTH:
+                topics.truth[_stamp_ns(msg)] = odometry_from_msg(msg)
             elif spec is CONTROL_WRENCH:
                 topics.stamps.append(_stamp_ns(msg))
                 topics.controls.append(controls_from_wrench(msg, arm_length))
@@ -112,7 +133,11 @@ def _read_topics(bag: Path, namespace: str | None, arm_length: float) -> _Topics
 
 
 def _flight_record(topics: _Topics, warnings: list) -> FlightRecord | None:
-    """One row per control step (see the module doc); None if there is no complete step."""
+    """One row per control step (see the module doc); None if there is no complete step.
+
+    The position and yaw are the true ones: ``ground_truth/odom`` where the bag has it (the
+    odometry then carries sensor noise), else ``odom``.
+    """
     steps = min(len(topics.stamps), len(topics.forces), len(topics.diagnostics))
     if steps < max(len(topics.stamps), len(topics.forces), len(topics.diagnostics)):
         warnings.append(f'unequal counts: {len(topics.stamps)} wrenches, {len(topics.forces)} rotor_forces, '
@@ -121,7 +146,7 @@ def _flight_record(topics: _Topics, warnings: list) -> FlightRecord | None:
     skipped = 0
     for stamp, controls, forces, (surfaces, equivalent, corrective) in zip(
             topics.stamps, topics.controls, topics.forces, topics.diagnostics):
-        sample, reference = topics.odometry.get(stamp), topics.references.get(stamp)
+        sample, reference = (topics.truth or topics.odometry).get(stamp), topics.references.get(stamp)
         if sample is None or reference is None:
             skipped += 1
             continue
@@ -137,20 +162,23 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
                 settle_time: float | None = None) -> BagFlight:
     """The flight recorded in ``bag``; raises BagReadError if it lacks what a flight record needs.
 
-    ``namespace``, ``vehicle_file`` and ``settle_time`` [s] override what the bag says.
+    ``namespace``, ``vehicle_file`` and ``settle_time`` [s] override what the bag says; without a
+    settle time in either, :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the flight.
     """
     bag = Path(bag)
+    check_bag_path(bag)
     has_mcap = bag.suffix == '.mcap' or (bag.is_dir() and any(bag.glob('*.mcap')))
     if has_mcap and not is_finalized(mcap_file(bag)):
         raise BagReadError(f'{bag}: the recording was not closed (killed?); run `recover {bag}` first')
     custom = read_custom_data(bag)
     warnings: list[str] = []
     params = _vehicle(custom, vehicle_file, warnings)
-    if settle_time is None:
-        settle_time = float(custom.get('settle_time_s', DEFAULT_SETTLE_TIME))
     if namespace is None:
         namespace = custom.get('namespace')
     record = _flight_record(_read_topics(bag, namespace, params.d), warnings)
     if record is None:
         raise BagReadError(f'{bag}: no complete control step')
+    if settle_time is None:
+        recorded = custom.get('settle_time_s')
+        settle_time = float(recorded) if recorded else default_settle_time(record.time[-1] - record.time[0])
     return BagFlight(bag, custom.get('controller') or bag.name, record, params, float(settle_time), custom, warnings)

@@ -12,7 +12,27 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from quad_msgs_bridge.frames import wrap_angle
+from quad_msgs_bridge.numeric import namespace_for
+
 SUBSYSTEMS = ('x', 'y', 'z', 'phi', 'theta', 'psi')
+SETTLE_TIME = 5.0           #: [s] take-off and convergence left out of the metrics (flights of 10 s or more)
+SHARE_WINDOW = 5.0          #: [s] windows of the fuzzy share in the metrics
+#: controllers whose corrective term (``control/diagnostics``) is the IT2 fuzzy term; that of the sliding
+#: mode baselines is their switching term, that of the PID zero, so they have no fuzzy share
+FUZZY_CONTROLLERS = ('nnit2fsmc',)
+
+
+def default_settle_time(duration: float) -> float:
+    """The settling window [s] of a flight of ``duration`` [s] when none is given: 5 s, or half the
+    flight when it is shorter than 10 s (so a short flight keeps half of its steps for the metrics)."""
+    return min(SETTLE_TIME, 0.5 * duration)
+
+
+def has_fuzzy_term(controller: str | None) -> bool:
+    """Whether the flight's corrective terms are fuzzy terms: true for the FUZZY_CONTROLLERS, and for a
+    flight of unknown controller (the contract names the diagnostics' corrective column fuzzy)."""
+    return controller is None or controller in FUZZY_CONTROLLERS
 
 
 @dataclass
@@ -70,40 +90,161 @@ def fuzzy_share(record: FlightRecord, window: float) -> dict[str, list[float]]:
     return shares
 
 
-def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max: float,
-                   share_window: float = 5.0) -> dict:
-    """Tracking, chattering and saturation figures of a flight, after ``settle_time`` [s].
+@dataclass
+class TrackingStatistics:
+    """The sums every tracking, chattering and saturation metric is made of (floats, or arrays over a batch).
 
-    * rmse_position_m, max_position_error_m: Euclidean position error [m];
-    * rmse_yaw_rad: wrapped yaw error [rad];
-    * chattering: total variation of each of U1..U4 per second of flight [N/s; U4: N m/s];
-    * saturation_fraction: share of control steps with any rotor at F_min or F_max (and the same
-      over the whole flight, saturation_fraction_whole_flight);
-    * fuzzy_share: see :func:`fuzzy_share`, over the whole flight.
+    "Settled" steps are those at or after ``settle_time`` after the first step. A record sums
+    them over its time axis (:func:`record_statistics`); a batch flight adds one step at a time
+    (:class:`StatisticsAccumulator`); :func:`tracking_metrics` turns either into the same figures.
     """
+
+    steps: object                    #: control steps flown
+    settled_steps: object            #: of which settled
+    squared_error_sum: object        #: [m^2] sum of squared Euclidean position errors, settled steps
+    max_error: object                #: [m] largest Euclidean position error, settled steps
+    squared_yaw_error_sum: object    #: [rad^2] sum of squared wrapped yaw errors, settled steps
+    variation: tuple                 #: sum of |U_i(k) - U_i(k-1)| over consecutive settled steps, i = 1..4
+    settled_span: object             #: [s] time from the first to the last settled step
+    saturated_steps: object          #: steps with a rotor at a limit, whole flight
+    saturated_settled_steps: object  #: the same, settled steps only
+    first_time: object               #: [s] time of the first step
+    last_time: object                #: [s] time of the last step
+
+
+def rotor_at_limit(forces, f_min: float, f_max: float):
+    """Whether any of the rotor thrusts F1..F4 [N] sits at F_min or F_max (to 1e-9 relative)."""
+    tolerance = 1e-9 * max(1.0, abs(f_max))
+    at_limit = False
+    for force in forces:
+        at_limit = at_limit | (force <= f_min + tolerance) | (force >= f_max - tolerance)
+    return at_limit
+
+
+def record_statistics(record: FlightRecord, settle_time: float, f_min: float, f_max: float) -> TrackingStatistics:
+    """The statistics of a whole recorded flight."""
     settled = record.time >= record.time[0] + settle_time
-    if settled.sum() < 2:
-        raise ValueError(f'flight of {record.time[-1] - record.time[0]:.3f} s is shorter than the '
-                         f'settling window {settle_time} s')
     error = np.linalg.norm(record.position - record.reference_position, axis=1)[settled]
     yaw_error = _wrap(record.yaw - record.reference_yaw)[settled]
     t = record.time[settled]
-    span = t[-1] - t[0]
-    controls = record.controls[settled]
-    variation = np.abs(np.diff(controls, axis=0)).sum(axis=0) / span
-    tolerance = 1e-9 * max(1.0, abs(f_max))
-    at_limit = np.any((record.forces <= f_min + tolerance) | (record.forces >= f_max - tolerance), axis=1)
+    at_limit = rotor_at_limit(record.forces.T, f_min, f_max)
+    return TrackingStatistics(
+        steps=len(record.time), settled_steps=int(settled.sum()),
+        squared_error_sum=float(np.sum(error ** 2)), max_error=float(error.max()) if error.size else 0.0,
+        squared_yaw_error_sum=float(np.sum(yaw_error ** 2)),
+        variation=tuple(float(v) for v in np.abs(np.diff(record.controls[settled], axis=0)).sum(axis=0)),
+        settled_span=float(t[-1] - t[0]) if t.size else 0.0,
+        saturated_steps=int(at_limit.sum()), saturated_settled_steps=int(at_limit[settled].sum()),
+        first_time=float(record.time[0]), last_time=float(record.time[-1]))
+
+
+class StatisticsAccumulator:
+    """:class:`TrackingStatistics` of one flight or a batch of flights, one control step at a time.
+
+    ``add`` takes the step's time [s], true position [m, world ENU], yaw [rad], reference position
+    and yaw, commanded rotor thrusts [N] and U1..U4, and ``flying`` (which vehicles of a batch
+    still fly; a failed vehicle's statistics stop at its last step). Values are floats for one
+    vehicle or arrays (B,) for a batch, through the same code.
+    """
+
+    def __init__(self, settle_time: float, f_min: float, f_max: float):
+        self.settle_time, self.f_min, self.f_max = settle_time, f_min, f_max
+        self.steps = self.settled_steps = self.saturated_steps = self.saturated_settled_steps = 0
+        self.squared_error_sum = self.max_error = self.squared_yaw_error_sum = 0.0
+        self.variation = (0.0, 0.0, 0.0, 0.0)
+        self.first_time = None
+        self.first_settled_time = self.last_time = self.last_settled_time = 0.0
+        self._previous_controls = None
+
+    def add(self, t: float, position, yaw, reference_position, reference_yaw, forces, controls, flying=True) -> None:
+        xp = namespace_for(position[0])
+        if self.first_time is None:
+            self.first_time = t
+        settled = t >= self.first_time + self.settle_time
+        count = xp.where(flying, 1, 0)
+        self.steps = self.steps + count
+        self.last_time = xp.where(flying, t, self.last_time)
+        at_limit = xp.where(rotor_at_limit(forces, self.f_min, self.f_max), count, 0)
+        self.saturated_steps = self.saturated_steps + at_limit
+        if not settled:
+            return
+        squared = sum((p - r) * (p - r) for p, r in zip(position, reference_position))
+        yaw_error = wrap_angle(yaw - reference_yaw)
+        on = xp.where(flying, 1.0, 0.0)
+        if self._previous_controls is not None:
+            self.variation = tuple(v + on * xp.abs(u - u0)
+                                   for v, u, u0 in zip(self.variation, controls, self._previous_controls))
+        else:
+            self.first_settled_time = t
+        self._previous_controls = controls
+        self.settled_steps = self.settled_steps + count
+        self.squared_error_sum = self.squared_error_sum + on * squared
+        self.max_error = xp.where(flying, xp.maximum(self.max_error, xp.sqrt(squared)), self.max_error)
+        self.squared_yaw_error_sum = self.squared_yaw_error_sum + on * yaw_error * yaw_error
+        self.saturated_settled_steps = self.saturated_settled_steps + at_limit
+        self.last_settled_time = xp.where(flying, t, self.last_settled_time)
+
+    def statistics(self) -> TrackingStatistics:
+        return TrackingStatistics(
+            steps=self.steps, settled_steps=self.settled_steps, squared_error_sum=self.squared_error_sum,
+            max_error=self.max_error, squared_yaw_error_sum=self.squared_yaw_error_sum, variation=self.variation,
+            settled_span=self.last_settled_time - self.first_settled_time,
+            saturated_steps=self.saturated_steps, saturated_settled_steps=self.saturated_settled_steps,
+            first_time=self.first_time, last_time=self.last_time)
+
+
+def tracking_metrics(stats: TrackingStatistics) -> dict:
+    """RMSE, max error, yaw RMSE, chattering and saturation from the statistics (floats or arrays).
+
+    * rmse_position_m, max_position_error_m: Euclidean position error [m], settled steps;
+    * rmse_yaw_rad: wrapped yaw error [rad], settled steps;
+    * chattering: total variation of each of U1..U4 per second of settled flight [N/s; U4: N m/s];
+    * saturation_fraction: share of settled control steps with any rotor at F_min or F_max
+      (saturation_fraction_whole_flight: over every step).
+    """
+    settled = np.maximum(stats.settled_steps, 1)
+    span = np.where(np.asarray(stats.settled_span) > 0.0, stats.settled_span, np.inf)
+    return {
+        'rmse_position_m': np.sqrt(stats.squared_error_sum / settled),
+        'max_position_error_m': stats.max_error,
+        'rmse_yaw_rad': np.sqrt(stats.squared_yaw_error_sum / settled),
+        'chattering': {f'U{i + 1}': v / span for i, v in enumerate(stats.variation)},
+        'saturation_fraction': stats.saturated_settled_steps / settled,
+        'saturation_fraction_whole_flight': stats.saturated_steps / np.maximum(stats.steps, 1),
+    }
+
+
+def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max: float,
+                   share_window: float = SHARE_WINDOW, fuzzy_term: bool = True, ended_early: bool = False) -> dict:
+    """Tracking, chattering and saturation figures of a flight, after ``settle_time`` [s].
+
+    The figures of :func:`tracking_metrics`, plus the flight's duration and step count, whether
+    every force and position is finite, and fuzzy_share (see :func:`fuzzy_share`, over the whole
+    flight; None without a fuzzy term: ``fuzzy_term`` false, see :func:`has_fuzzy_term`). A flight
+    that ``ended_early`` (failed) before two settled steps has NaN tracking figures; any other flight
+    that short is refused (ValueError).
+    """
+    stats = record_statistics(record, settle_time, f_min, f_max)
+    if stats.settled_steps < 2 and not ended_early:
+        duration = record.time[-1] - record.time[0]
+        raise ValueError(f'the flight of {duration:.3f} s is not longer than the settling window of {settle_time:g} s; '
+                         f'pass a settle time below {duration:.3f} s (e.g. --settle-time '
+                         f'{default_settle_time(duration):.3g})')
+    tracking = tracking_metrics(stats)
+    if stats.settled_steps < 2:
+        tracking = {key: ({k: math.nan for k in value} if isinstance(value, dict) else math.nan)
+                    for key, value in tracking.items()}
     return {
         'settle_time_s': float(settle_time),
         'duration_s': float(record.time[-1] - record.time[0]),
         'control_steps': int(len(record.time)),
-        'rmse_position_m': float(np.sqrt(np.mean(error ** 2))),
-        'max_position_error_m': float(error.max()),
-        'rmse_yaw_rad': float(np.sqrt(np.mean(yaw_error ** 2))),
-        'chattering': {f'U{i + 1}': float(v) for i, v in enumerate(variation)},
-        'saturation_fraction': float(at_limit[settled].mean()),
-        'saturation_fraction_whole_flight': float(at_limit.mean()),
+        'rmse_position_m': float(tracking['rmse_position_m']),
+        'max_position_error_m': float(tracking['max_position_error_m']),
+        'rmse_yaw_rad': float(tracking['rmse_yaw_rad']),
+        'chattering': {name: float(value) for name, value in tracking['chattering'].items()},
+        'saturation_fraction': float(tracking['saturation_fraction']),
+        'saturation_fraction_whole_flight': float(tracking['saturation_fraction_whole_flight']),
         'all_finite': bool(np.isfinite(record.forces).all() and np.isfinite(record.position).all()),
         'fuzzy_share_window_s': float(share_window),
-        'fuzzy_share': fuzzy_share(record, share_window),
+        'fuzzy_share': fuzzy_share(record, share_window) if fuzzy_term else None,
     }

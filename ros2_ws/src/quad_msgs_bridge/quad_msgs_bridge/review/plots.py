@@ -1,12 +1,16 @@
 """PNG plots of one or several flights (overlaid), after the paper's Fig. 7-9.
 
-* ``path_3d.png``: the 3-D path against the reference (Fig. 7);
-* ``tracking.png``: x, y, z [m] and yaw [rad] against their references, and the errors (Fig. 8);
+* ``path_3d.png``: the 3-D path against the reference (Fig. 7), equal scales on the three axes
+  (a hover's millimetre drift stays millimetres), a reference that does not move as a hold point;
+* ``tracking.png``: x, y, z [m] and yaw [rad] against their references, the errors over the whole
+  flight with the end of the settling window marked, and the errors after it on their own scale
+  [mm, mrad] (Fig. 8);
 * ``controls.png``: U1..U4 and the rotor thrusts F1..F4 against time (Fig. 9);
 * ``controls_zoom.png``: U1..U4 over one second after settling, where chattering shows;
-* ``surfaces.png``: the sliding surfaces S of the six subsystems;
-* ``fuzzy_share.png``: the fuzzy (corrective) share of each subsystem's control over time,
-  :func:`quad_msgs_bridge.review.metrics.fuzzy_share` on short windows.
+* ``surfaces.png``: the sliding surfaces S of the six subsystems [m/s, rad/s];
+* ``fuzzy_share.png``: the fuzzy share of each subsystem's control over time,
+  :func:`quad_msgs_bridge.review.metrics.fuzzy_share` on 0.5 s windows and on the windows of the
+  metrics (5 s); only flights whose controller has a fuzzy term (no figure if none has).
 
 Needs matplotlib (imported here only; the Agg backend, no display).
 """
@@ -19,12 +23,16 @@ import numpy as np
 
 from quad_msgs_bridge.conversions import SUBSYSTEM_NAMES
 from quad_msgs_bridge.review.flight_from_bag import BagFlight
-from quad_msgs_bridge.review.metrics import _wrap, fuzzy_share
+from quad_msgs_bridge.review.metrics import SHARE_WINDOW, _wrap, fuzzy_share, has_fuzzy_term
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS, ROTOR_NAMES
 
-SHARE_WINDOW = 0.5        #: [s] window of the fuzzy-share plot
+FINE_SHARE_WINDOW = 0.5   #: [s] short windows of the fuzzy-share plot (the metrics use SHARE_WINDOW)
 ZOOM_SPAN = 1.0           #: [s] span of the control zoom
+HOLD_TOLERANCE = 1e-6     #: [m] a reference that moves less is drawn as a hold point
+#: unit of S = de/dt + lambda e per subsystem: e in m (x, y, z) or rad (phi, theta, psi)
+SURFACE_UNITS = {'x': 'm/s', 'y': 'm/s', 'z': 'm/s', 'phi': 'rad/s', 'theta': 'rad/s', 'psi': 'rad/s'}
 _REFERENCE_STYLE = dict(color='black', linestyle='--', linewidth=1.0)
+_SETTLE_STYLE = dict(color='tab:red', linestyle=':', linewidth=1.0)
 
 
 def _pyplot():
@@ -51,28 +59,41 @@ def _legend(ax, flights: Sequence[BagFlight]) -> None:
         ax.legend(fontsize='small', loc='best')
 
 
+def equal_limits(points: np.ndarray) -> list[tuple[float, float]]:
+    """(low, high) [m] per axis of the cube centred on ``points`` (M, 3) that holds them all."""
+    low, high = points.min(axis=0), points.max(axis=0)
+    half = max(float((high - low).max()) / 2.0, 1e-3)
+    return [(c - half, c + half) for c in (low + high) / 2.0]
+
+
 def plot_path_3d(plt, flights: Sequence[BagFlight], path: Path) -> Path:
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection='3d')
     reference = flights[0].record.reference_position
-    ax.plot(reference[:, 0], reference[:, 1], reference[:, 2], label='reference', **_REFERENCE_STYLE)
+    if np.ptp(reference, axis=0).max() > HOLD_TOLERANCE:
+        ax.plot(reference[:, 0], reference[:, 1], reference[:, 2], label='reference', **_REFERENCE_STYLE)
+    else:
+        ax.scatter(*reference[0], marker='x', s=80, color='black', depthshade=False, label='hold point (reference)')
     for i, flight in enumerate(flights):
         p = flight.record.position
         ax.plot(p[:, 0], p[:, 1], p[:, 2], linewidth=1.2, **_layer(i, flights))
-    ax.set_xlabel('x [m]')
-    ax.set_ylabel('y [m]')
-    ax.set_zlabel('z [m]')
-    ax.set_title('Path in 3-D against the reference (Fig. 7)')
+    limits = equal_limits(np.vstack([reference] + [f.record.position for f in flights]))
+    ax.set(xlim=limits[0], ylim=limits[1], zlim=limits[2], xlabel='x [m]', ylabel='y [m]', zlabel='z [m]')
+    ax.set_box_aspect((1.0, 1.0, 1.0))
+    ax.set_title('Path in 3-D against the reference (Fig. 7), equal axis scales')
     ax.legend(fontsize='small')
     return _save(fig, path)
 
 
 def plot_tracking(plt, flights: Sequence[BagFlight], path: Path) -> Path:
-    fig, axes = plt.subplots(4, 2, figsize=(12, 10), sharex=True)
-    names = ('x [m]', 'y [m]', 'z [m]', 'yaw [rad]')   # yaw unwrapped for display
+    """Per row (x, y, z, yaw): the value against the reference, the error over the whole flight (the end of
+    the settling window marked), and the error after settling on its own scale [mm, mrad]."""
+    fig, axes = plt.subplots(4, 3, figsize=(15, 10))
+    names, units = ('x', 'y', 'z', 'yaw'), ('m', 'm', 'm', 'rad')   # yaw unwrapped for display
     first = flights[0].record
-    for row, name in enumerate(names):
-        value_ax, error_ax = axes[row]
+    settled_from = first.time[0] + flights[0].settle_time
+    for row, (name, unit) in enumerate(zip(names, units)):
+        value_ax, error_ax, settled_ax = axes[row]
         reference = np.unwrap(first.reference_yaw) if row == 3 else first.reference_position[:, row]
         value_ax.plot(first.time, reference, label='reference', **_REFERENCE_STYLE)
         for i, flight in enumerate(flights):
@@ -81,17 +102,23 @@ def plot_tracking(plt, flights: Sequence[BagFlight], path: Path) -> Path:
                 value, error = np.unwrap(r.yaw), _wrap(r.yaw - r.reference_yaw)
             else:
                 value, error = r.position[:, row], r.position[:, row] - r.reference_position[:, row]
+            settled = r.time >= r.time[0] + flight.settle_time
             value_ax.plot(r.time, value, linewidth=1.0, **_layer(i, flights))
             error_ax.plot(r.time, error, linewidth=1.0, **_layer(i, flights))
-        value_ax.set_ylabel(name)
-        error_ax.set_ylabel('error ' + name)
-        error_ax.axhline(0.0, color='grey', linewidth=0.5)
+            settled_ax.plot(r.time[settled], 1000.0 * error[settled], linewidth=1.0, **_layer(i, flights))
+        value_ax.set_ylabel(f'{name} [{unit}]')
+        error_ax.set_ylabel(f'error {name} [{unit}]')
+        settled_ax.set_ylabel(f'error {name} [m{unit}]')
+        error_ax.axvline(settled_from, label='end of settling window', **_SETTLE_STYLE)
+        for ax in (error_ax, settled_ax):
+            ax.axhline(0.0, color='grey', linewidth=0.5)
     axes[0][0].set_title('Tracking (Fig. 8)')
-    axes[0][1].set_title('Tracking error')
+    axes[0][1].set_title('Tracking error, whole flight')
+    axes[0][2].set_title(f'Tracking error after settling ({flights[0].settle_time:g} s)')
     for ax in axes[-1]:
         ax.set_xlabel('t [s]')
-    _legend(axes[0][0], flights)
-    _legend(axes[0][1], flights)
+    for ax in axes[0]:
+        _legend(ax, flights)
     return _save(fig, path)
 
 
@@ -130,7 +157,7 @@ def plot_surfaces(plt, flights: Sequence[BagFlight], path: Path) -> Path:
         for i, flight in enumerate(flights):
             ax.plot(flight.record.time, flight.record.surfaces[:, k], linewidth=0.8, **_layer(i, flights))
         ax.axhline(0.0, color='grey', linewidth=0.5)
-        ax.set_ylabel(f'S_{name}')
+        ax.set_ylabel(f'S_{name} [{SURFACE_UNITS[name]}]')
     axes[0][0].set_title('Sliding surfaces S = de/dt + lambda e')
     for ax in axes[-1]:
         ax.set_xlabel('t [s]')
@@ -138,20 +165,27 @@ def plot_surfaces(plt, flights: Sequence[BagFlight], path: Path) -> Path:
     return _save(fig, path)
 
 
-def plot_fuzzy_share(plt, flights: Sequence[BagFlight], path: Path) -> Path:
+def plot_fuzzy_share(plt, flights: Sequence[BagFlight], path: Path) -> Path | None:
+    """The fuzzy share on FINE_SHARE_WINDOW windows (thin lines) and on the SHARE_WINDOW windows of the
+    metrics (steps), of the flights whose controller has a fuzzy term; None (no figure) if none has."""
+    shown = [i for i, flight in enumerate(flights) if has_fuzzy_term(flight.custom_data.get('controller'))]
+    if not shown:
+        return None
     fig, axes = plt.subplots(3, 2, figsize=(12, 8), sharex=True, sharey=True)
-    for i, flight in enumerate(flights):
-        shares = fuzzy_share(flight.record, SHARE_WINDOW)
-        start = flight.record.time[0]
+    for i in shown:
+        time = flights[i].record.time
+        fine, coarse = fuzzy_share(flights[i].record, FINE_SHARE_WINDOW), fuzzy_share(flights[i].record, SHARE_WINDOW)
         for k, name in enumerate(SUBSYSTEM_NAMES):
-            values = shares[name]
-            centres = start + SHARE_WINDOW * (np.arange(len(values)) + 0.5)
-            axes[k // 2][k % 2].plot(centres, values, linewidth=1.0, **_layer(i, flights))
+            ax = axes[k // 2][k % 2]
+            centres = time[0] + FINE_SHARE_WINDOW * (np.arange(len(fine[name])) + 0.5)
+            ax.plot(centres, fine[name], color=f'C{i}', linewidth=0.6, alpha=0.6, zorder=1)
+            edges = np.minimum(time[0] + SHARE_WINDOW * np.arange(len(coarse[name]) + 1), time[-1])
+            ax.stairs(coarse[name], edges, baseline=None, color=f'C{i}', linewidth=1.8, **_layer(i, flights))
     for k, name in enumerate(SUBSYSTEM_NAMES):
-        axes[k // 2][k % 2].set_ylabel(f'corrective share {name}')
+        axes[k // 2][k % 2].set_ylabel(f'fuzzy share {name}')
     axes[0][0].set_ylim(-0.02, 1.02)
-    fig.suptitle('Share of the corrective term (NNIT2FSMC: fuzzy vs NN): |corrective| / (|equivalent| + '
-                 f'|corrective|), {SHARE_WINDOW:g} s windows')
+    fig.suptitle('Fuzzy share |fuzzy term| / (|NN term| + |fuzzy term|): thin, '
+                 f'{FINE_SHARE_WINDOW:g} s windows; steps, the {SHARE_WINDOW:g} s windows of the metrics')
     for ax in axes[-1]:
         ax.set_xlabel('t [s]')
     _legend(axes[0][0], flights)
@@ -166,11 +200,12 @@ def plot_flights(flights: Sequence[BagFlight], out_dir: Path) -> list[Path]:
     zoom_start = max(time[0], min(time[0] + settle, time[-1] - ZOOM_SPAN))
     zoom = (zoom_start, min(zoom_start + ZOOM_SPAN, time[-1]))
     try:
-        return [plot_path_3d(plt, flights, out_dir / 'path_3d.png'),
-                plot_tracking(plt, flights, out_dir / 'tracking.png'),
-                plot_controls(plt, flights, out_dir / 'controls.png'),
-                plot_controls(plt, flights, out_dir / 'controls_zoom.png', span=zoom),
-                plot_surfaces(plt, flights, out_dir / 'surfaces.png'),
-                plot_fuzzy_share(plt, flights, out_dir / 'fuzzy_share.png')]
+        plots = [plot_path_3d(plt, flights, out_dir / 'path_3d.png'),
+                 plot_tracking(plt, flights, out_dir / 'tracking.png'),
+                 plot_controls(plt, flights, out_dir / 'controls.png'),
+                 plot_controls(plt, flights, out_dir / 'controls_zoom.png', span=zoom),
+                 plot_surfaces(plt, flights, out_dir / 'surfaces.png'),
+                 plot_fuzzy_share(plt, flights, out_dir / 'fuzzy_share.png')]
+        return [plot for plot in plots if plot is not None]
     finally:
         plt.close('all')

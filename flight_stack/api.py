@@ -1,0 +1,84 @@
+"""The flight stack as a Python library: a few stable names for people who bring their own simulator,
+their own vehicle, or want a flight or a campaign from a script.
+
+    from flight_stack.api import make_controller, hold, fly, run_campaign
+
+Conventions (the paper's, REP 103):
+
+* state: 12 values ``x y z`` [m, world ENU], ``vx vy vz`` [m/s, world ENU], ``phi theta psi``
+  (roll, pitch, yaw; Z-Y-X Euler angles) [rad], and their rates ``dphi dtheta dpsi`` [rad/s]
+  (Euler-angle rates, not body rates: :func:`quad_msgs_bridge.frames.euler_rates_from_body_rates`
+  converts a gyro's body rates exactly);
+* reference: :class:`Reference` (position [m], velocity [m/s], acceleration [m/s^2], all world
+  ENU; yaw [rad], yaw rate [rad/s], yaw acceleration [rad/s^2]); :func:`hold` holds a point;
+* output: rotor thrusts F1 front, F2 right, F3 back, F4 left [N] within the rotor limits, the
+  virtual controls U1 [N], U2 [N], U3 [N], U4 [N m] of the paper's eq. (2) they realise, and per
+  subsystem (x, y, z, phi, theta, psi) the sliding surface, equivalent and corrective terms.
+
+Call ``update`` once per control period (``controller.dt`` [s]) with a state and the reference
+for the same instant. The same controller steps a batch of vehicles when built with ``batch=B``
+(then every state value is a numpy array of B values).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Mapping
+
+from nnit2fsmc_controller.controller import CascadedController, ControlOutput
+from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, load_gains
+from nnit2fsmc_controller.trajectory import SCENARIOS
+from quad_msgs_bridge.reference import ReferenceSample as Reference, hold
+from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
+
+__all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'ParameterError', 'Reference',
+           'VehicleParams', 'fly', 'hold', 'load_gains', 'load_vehicle', 'make_controller', 'run_campaign']
+
+
+def load_vehicle(path: str | Path | None = None) -> VehicleParams:
+    """The vehicle description (paper Table I, SI units) of a vehicle YAML; None: the packaged one."""
+    return load_vehicle_file(path)[0]
+
+
+def make_controller(kind: str = 'nnit2fsmc', vehicle: VehicleParams | str | Path | None = None,
+                    gains: Mapping[str, Any] | str | Path | None = None, batch: int | None = None) -> CascadedController:
+    """A fresh controller of ``kind`` (one of CONTROLLERS) for the nominal ``vehicle`` (a VehicleParams
+    or a vehicle YAML; None: the packaged one) with ``gains`` (a gains mapping or YAML; None: the
+    packaged ones). Raises ParameterError naming an invalid value."""
+    if not isinstance(vehicle, VehicleParams):
+        vehicle = load_vehicle(vehicle)
+    if gains is None or isinstance(gains, (str, Path)):
+        gains = load_gains(gains)
+    return build_controller(kind, vehicle, gains, batch=batch)
+
+
+def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
+        disturbances: bool | None = None, seed: int = 0, vehicle: str | Path | None = None,
+        gains: str | Path | None = None, physics_rate: float = 1000.0, settle_time: float | None = None,
+        max_error: float = 1.0, out: str | Path | None = None, overwrite: bool = False) -> dict:
+    """Fly a whole scenario on the embedded backend (no ROS) and return its summary (the content of
+    ``summary.json``: rmse_position_m, max_position_error_m, rmse_yaw_rad, chattering, ...).
+
+    With ``out`` the run is written as ``run_stack.py --out`` writes it (summary, bag, review);
+    without it nothing is written. Raises ParameterError before flying on any invalid setting.
+    """
+    from .cli import run_flight
+    return run_flight(controller, scenario, duration=duration, disturbances=disturbances, seed=seed,
+                      vehicle=vehicle, gains=gains, physics_rate=physics_rate, settle_time=settle_time,
+                      max_error=max_error, out=out, overwrite=overwrite)
+
+
+def run_campaign(spec: str | Path, out: str | Path, *, flights: int | None = None, seed: int | None = None,
+                 duration: float | None = None, controllers: list[str] | None = None, workers: int | None = None,
+                 batch_size: int | None = None, scheduler: str | None = None, resume: bool = False,
+                 progress: bool = False) -> dict:
+    """Run the robustness campaign of ``spec`` (a SPEC.yaml, docs/CAMPAIGNS.md) into ``out`` and
+    return the content of ``campaign.json`` (per controller: success rate and its 95 % Wilson
+    interval, RMSE and chattering percentiles). The keyword arguments are the command's options."""
+    import json
+
+    from .campaign.runner import RunOptions, run_campaign as run
+    from .campaign.spec import load_spec
+    campaign = load_spec(spec).overridden(flights=flights, seed=seed, duration=duration, controllers=controllers)
+    outcome = run(campaign, Path(out), RunOptions(workers=workers, batch_size=batch_size, scheduler=scheduler,
+                                                  resume=resume, progress=progress))
+    return json.loads(outcome.summary_path.read_text())

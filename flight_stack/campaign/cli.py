@@ -1,0 +1,97 @@
+"""``run_stack.py campaign SPEC.yaml --out DIR``: the robustness campaign command."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+DESCRIPTION = """Fly a robustness campaign: every controller of the spec flies the same perturbed flights
+(true vehicle vs nominal model, wind, sensor noise, delay, motor lag), as numpy batches on local
+worker processes or on a Dask cluster. Writes DIR/flights.csv (one row per flight and controller,
+appended batch by batch), DIR/campaign.json (success rate with its 95 % Wilson interval, RMSE and
+chattering percentiles per controller) and DIR/report.html. SPEC.yaml: see docs/CAMPAIGNS.md."""
+
+EPILOG = """examples:
+  python3 run_stack.py campaign campaigns/paper-robustness.yaml --out out/campaign
+  python3 run_stack.py campaign campaigns/paper-robustness.yaml --out out/campaign --resume
+  python3 run_stack.py campaign campaigns/paper-robustness.yaml --out out/campaign --replay 17
+  python3 run_stack.py campaign SPEC.yaml --out DIR --scheduler tcp://127.0.0.1:8786
+
+A Dask scheduler runs whatever code it is sent: start it on localhost or a trusted network only."""
+
+
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog='run_stack.py campaign', description=DESCRIPTION, epilog=EPILOG,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('spec', type=Path, help='campaign spec (YAML)')
+    parser.add_argument('--out', type=Path, default=None, help='output folder (default out/campaign-<spec name>)')
+    parser.add_argument('--flights', type=int, default=None, help='flights per controller (overrides the spec)')
+    parser.add_argument('--seed', type=int, default=None, help='campaign seed (overrides the spec)')
+    parser.add_argument('--duration', type=float, default=None, help='sim time per flight [s] (overrides the spec)')
+    parser.add_argument('--controllers', default=None, help='comma-separated controllers (overrides the spec)')
+    parser.add_argument('--workers', type=int, default=None, help='local worker processes (default: every core)')
+    parser.add_argument('--batch-size', type=int, default=None,
+                        help='flights stepped together per batch (default: an even share per worker, at most 500)')
+    parser.add_argument('--scheduler', default=None, metavar='ADDRESS',
+                        help='run the batches on this Dask distributed scheduler (e.g. tcp://127.0.0.1:8786)')
+    parser.add_argument('--replay', type=int, default=None, metavar='K',
+                        help='fly flight K alone on the ordinary embedded path, with its bag and review, '
+                             'into DIR/replay-K/<controller>/')
+    parser.add_argument('--resume', action='store_true', help='fly only the flights DIR/flights.csv lacks')
+    parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle YAML (default: the packaged one)')
+    parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
+    parser.add_argument('--quiet', action='store_true', help='no progress bar')
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str]) -> int:
+    args = parse_args(argv)
+    from .runner import RunOptions, run_campaign
+    from .spec import load_spec
+    try:
+        spec = load_spec(args.spec).overridden(flights=args.flights, seed=args.seed, duration=args.duration,
+                                               controllers=args.controllers)
+        out_dir = args.out or Path('out') / f'campaign-{args.spec.stem}'
+        options = RunOptions(workers=args.workers, batch_size=args.batch_size, scheduler=args.scheduler,
+                             resume=args.resume, progress=not args.quiet,
+                             vehicle_file=None if args.vehicle is None else str(args.vehicle),
+                             gains_file=None if args.gains is None else str(args.gains))
+        options.worker_count()
+        if args.replay is not None:
+            from .replay import replay_flight
+            return replay_flight(spec, out_dir, args.replay, options)
+        print(f'campaign: {len(spec.controllers)} controller(s) x {spec.flights} flights of "{spec.scenario}", '
+              f'{spec.duration:g} s each, seed {spec.seed} -> {out_dir}', file=sys.stderr)
+        outcome = run_campaign(spec, out_dir, options)
+    except ParameterError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f'interrupted: every finished batch is in {out_dir / "flights.csv"}; '
+              'rerun with --resume to fly the rest', file=sys.stderr)
+        return 130
+    rate = outcome.vehicle_steps / outcome.wall_time_s if outcome.wall_time_s > 0 else float('nan')
+    print(f'flew {outcome.flights_flown} flights in {outcome.wall_time_s:.1f} s '
+          f'({rate:,.0f} vehicle-steps/s)', file=sys.stderr)
+    print(format_table(outcome.summary_path))
+    print(f'results: {outcome.summary_path}, {outcome.summary_path.parent / "flights.csv"}, '
+          f'{outcome.summary_path.parent / "report.html"}')
+    return 0
+
+
+def format_table(summary_path: Path) -> str:
+    """The per-controller table of campaign.json, for the terminal."""
+    import json
+    summary = json.loads(summary_path.read_text())
+    lines = [f'{"controller":20s} {"finished":>9s} {"95% interval":>15s} {"RMSE p50":>9s} {"p95":>8s} {"p99":>8s} '
+             f'{"max":>8s} [cm]  {"TV p50":>8s} {"p95":>8s}']
+    for name, entry in summary['controllers'].items():
+        rmse, tv = entry['rmse_position_m'], entry['chattering_total']
+        low, high = entry['success_rate_wilson95']
+        cm = [f'{rmse[k] * 100:8.3f}' if rmse[k] is not None else '       -' for k in ('p50', 'p95', 'p99', 'max')]
+        tvs = [f'{tv[k]:8.3g}' if tv[k] is not None else '       -' for k in ('p50', 'p95')]
+        lines.append(f'{name:20s} {entry["finished"]:4d}/{entry["flights"]:<4d} '
+                     f'{low * 100:6.2f}-{high * 100:6.2f}% {cm[0]} {cm[1]} {cm[2]} {cm[3]}       {tvs[0]} {tvs[1]}')
+    return '\n'.join(lines)

@@ -1,0 +1,72 @@
+"""``--replay K``: flight K of a campaign flown alone on the ordinary embedded path, with bag and review.
+
+The flight has the same true vehicle, air, sensor errors, delay and motor lag as in the campaign
+(the same random streams), but runs through the single-vehicle embedded flight: odometry
+messages, a recorded bag, the summary and the review report, as ``run_stack.py`` writes them for
+any flight. Its metrics equal its row of ``flights.csv`` (the batch arithmetic differs only in
+rounding); the command prints the largest difference when the row is there.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from quad_msgs_bridge.bag.flight_bag import FlightBag
+from quad_msgs_bridge.contract import GROUND_TRUTH, RECORDED_TOPICS
+from quad_msgs_bridge.review.command import review_bags
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+from ..embedded import fly_embedded
+from ..summary import build_summary, write_summary
+from .batch import CampaignSetup
+from .results import FLIGHTS_FILE, read_flights
+from .runner import RunOptions
+from .sampling import build_perturbations, sample_conditions
+from .spec import CampaignSpec
+
+#: summary key -> flights.csv column, for the comparison
+COMPARED = {'rmse_position_m': 'rmse_position_m', 'max_position_error_m': 'max_position_error_m',
+            'rmse_yaw_rad': 'rmse_yaw_rad', 'saturation_fraction': 'saturation_fraction'}
+
+
+def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOptions) -> int:
+    """Fly flight ``flight`` with every controller of ``spec``; 0 when every replay flew (1 if one failed)."""
+    if not 0 <= flight < spec.flights:
+        raise ParameterError(f'--replay: flight {flight} is not in the campaign (0 .. {spec.flights - 1})')
+    setup = CampaignSetup.of(spec, options.vehicle_file, options.gains_file)
+    rows = {(r['flight'], r['controller']): r for r in read_flights(out_dir / FLIGHTS_FILE)}
+    status = 0
+    for controller in spec.controllers:
+        target = out_dir / f'replay-{flight}' / controller
+        conditions = sample_conditions(spec, setup.nominal, flight)
+        perturbations = build_perturbations(spec, [conditions], setup.control_dt, setup.physics_dt, batch=False)
+        topics = RECORDED_TOPICS + ((GROUND_TRUTH,) if perturbations.sensor_noise is not None else ())
+        print(f'replaying flight {flight} with {controller} -> {target}', file=sys.stderr)
+        with FlightBag.create(target / 'bag', setup.nominal, spec.settle_time, topics=topics, overwrite=True,
+                              controller=controller, scenario=spec.scenario, backend='embedded',
+                              campaign_seed=spec.seed, flight=flight) as bag:
+            result = fly_embedded(controller, setup.trajectory, setup.nominal, setup.disturbances, setup.gains,
+                                  spec.duration, 1.0 / setup.physics_dt, progress=options.progress, bag=bag,
+                                  perturbations=perturbations, rules=setup.rules(spec))
+        summary = build_summary(result.record, backend='embedded', controller=controller, scenario=spec.scenario,
+                                seed=spec.seed, settle_time=spec.settle_time, params=setup.nominal,
+                                disturbances=setup.disturbances, gains=setup.gains,
+                                physics_rate=1.0 / setup.physics_dt, wall_time_s=result.wall_time_s,
+                                max_error=spec.max_error_m, failure=result.failure)
+        summary['campaign'] = {'flight': flight, 'sampled': conditions.sampled_values(setup.nominal)}
+        write_summary(summary, target)
+        review_bags([target / 'bag'], target)
+        outcome = 'finished' if result.failure is None else f'FAILED at {result.failure_time_s:.3f} s: {result.failure}'
+        print(f'  {controller}: {outcome}; RMSE {summary["rmse_position_m"] * 100:.4f} cm; report {target / "report.html"}')
+        row = rows.get((flight, controller))
+        if row is not None:
+            if row['finished'] != (result.failure is None):
+                print(f'  differs from flights.csv: finished {row["finished"]} there', file=sys.stderr)
+                status = 1
+            elif row['finished']:
+                worst = max(abs(summary[key] - row[column]) for key, column in COMPARED.items())
+                worst = max(worst, *(abs(summary['chattering'][f'U{i}'] - row[f'chattering_U{i}']) for i in range(1, 5)))
+                print(f'  largest difference from its flights.csv row: {worst:.3g}')
+        if result.failure is not None:
+            status = 1
+    return status

@@ -1,0 +1,128 @@
+"""Flight k of a campaign: its sampled conditions, and the perturbation objects that fly them.
+
+Everything random about flight k comes from the streams of
+``quad_sim.perturbations.streams.flight_streams(seed, k)``: the true vehicle from ``vehicle``
+(exactly :data:`VEHICLE_DRAWS` uniform numbers, one per perturbed value, in the order of
+:data:`VEHICLE_DRAW_ORDER`, whether or not the spec perturbs it), the mean wind direction from
+``wind``, the turbulence, the sensor noise and its bias from their own streams. A flight's result
+therefore depends only on (seed, k), never on the batch it flies in, the worker or the machine,
+and every controller of a campaign flies the same vehicles in the same air.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Sequence
+
+import numpy as np
+
+from quad_msgs_bridge.vehicle_params import VehicleParams
+from quad_sim.perturbations.actuation import MotorLag, TransportDelay
+from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
+from quad_sim.perturbations.streams import flight_streams
+from quad_sim.perturbations.wind import Wind
+
+from ..embedded import Perturbations
+from .spec import CampaignSpec
+
+TRANSLATIONAL_DRAG = ('Kfx', 'Kfy', 'Kfz', 'Kfphi', 'Kftheta', 'Kfpsi')
+#: (spec key, number of values) in the order the vehicle stream's uniform numbers are used
+VEHICLE_DRAW_ORDER = (('mass', 1), ('inertia', 3), ('drag', 6), ('thrust_coefficient', 4),
+                      ('drag_coefficient', 4), ('cog_offset_m', 2), ('rotor_efficiency_loss', 4))
+VEHICLE_DRAWS = sum(count for _, count in VEHICLE_DRAW_ORDER)
+#: the sampled values of a flight as flights.csv names them (SI units)
+SAMPLED_COLUMNS = ('mass_kg', 'Ix_kgm2', 'Iy_kgm2', 'Iz_kgm2', *TRANSLATIONAL_DRAG,
+                   *(f'{name}{i}{unit}' for i in range(1, 5)
+                     for name, unit in (('Kp', '_Nss'), ('Kd', '_Nmss'), ('efficiency_loss', ''))),
+                   'cog_x_m', 'cog_y_m', 'wind_direction_rad')
+NOISE_FIELDS = {'position_m': 'position', 'velocity_mps': 'velocity', 'attitude_rad': 'attitude',
+                'body_rate_radps': 'body_rate'}
+
+
+@dataclass(frozen=True)
+class FlightConditions:
+    """The sampled conditions of one flight (SI units)."""
+
+    flight: int                   #: index in the campaign
+    vehicle: VehicleParams        #: the true vehicle (the controllers keep the nominal one)
+    wind_direction: float         #: [rad] towards which the mean wind blows, from +x towards +y
+
+    def sampled_values(self, nominal: VehicleParams) -> dict[str, float]:
+        """Every value that differs between flights, named with its unit, for ``flights.csv``."""
+        v = self.vehicle
+        values = {'mass_kg': v.m, 'Ix_kgm2': v.Ix, 'Iy_kgm2': v.Iy, 'Iz_kgm2': v.Iz}
+        values.update({name: getattr(v, name) for name in TRANSLATIONAL_DRAG})
+        for i in range(4):
+            values[f'Kp{i + 1}_Nss'] = v.rotor_thrust_factors[i] * nominal.Kp
+            values[f'Kd{i + 1}_Nmss'] = v.rotor_drag_factors[i] * nominal.Kd
+            values[f'efficiency_loss{i + 1}'] = v.rotor_efficiency_loss[i]
+        values['cog_x_m'], values['cog_y_m'] = v.cog_offset[0], v.cog_offset[1]
+        values['wind_direction_rad'] = self.wind_direction
+        return {name: values[name] for name in SAMPLED_COLUMNS}
+
+
+def sample_conditions(spec: CampaignSpec, nominal: VehicleParams, flight: int) -> FlightConditions:
+    """The conditions of flight ``flight`` of ``spec`` around the ``nominal`` vehicle."""
+    streams = flight_streams(spec.seed, flight)
+    uniforms = iter(streams.vehicle.random(VEHICLE_DRAWS).tolist())
+    draws = {key: [next(uniforms) for _ in range(count)] for key, count in VEHICLE_DRAW_ORDER}
+
+    def relative(key: str, index: int) -> float:
+        distribution = spec.vehicle.get(key)
+        return 1.0 + distribution.value(draws[key][index]) if distribution else 1.0
+
+    def absolute(key: str, index: int) -> float:
+        distribution = spec.vehicle.get(key)
+        return distribution.value(draws[key][index]) if distribution else 0.0
+
+    loss = spec.vehicle.get('rotor_efficiency_loss')
+    vehicle = replace(
+        nominal,
+        m=nominal.m * relative('mass', 0),
+        Ix=nominal.Ix * relative('inertia', 0), Iy=nominal.Iy * relative('inertia', 1),
+        Iz=nominal.Iz * relative('inertia', 2),
+        **{name: getattr(nominal, name) * relative('drag', i) for i, name in enumerate(TRANSLATIONAL_DRAG)},
+        rotor_thrust_factors=tuple(relative('thrust_coefficient', i) for i in range(4)),
+        rotor_drag_factors=tuple(relative('drag_coefficient', i) for i in range(4)),
+        cog_offset=(absolute('cog_offset_m', 0), absolute('cog_offset_m', 1), 0.0),
+        # a loss lies in [0, bound): the uniform half width maps onto [0, x), a normal onto |N(0, s)|
+        rotor_efficiency_loss=tuple(0.0 if loss is None else
+                                    (loss.scale * draws['rotor_efficiency_loss'][i] if loss.kind == 'uniform'
+                                     else abs(loss.value(draws['rotor_efficiency_loss'][i])))
+                                    for i in range(4)))
+    direction = (math.radians(spec.wind_direction_deg) if spec.wind_direction_deg is not None
+                 else float(streams.wind.uniform(0.0, 2.0 * math.pi)))
+    return FlightConditions(flight, vehicle, direction)
+
+
+def _noise_levels(spec: CampaignSpec, attribute: str) -> SensorErrors:
+    return SensorErrors(**{field: getattr(spec.sensor_noise[key], attribute)
+                           for key, field in NOISE_FIELDS.items() if key in spec.sensor_noise})
+
+
+def build_perturbations(spec: CampaignSpec, conditions: Sequence[FlightConditions], control_dt: float,
+                        physics_dt: float, batch: bool) -> Perturbations:
+    """The perturbation objects that fly ``conditions``: of one vehicle (``batch`` false, one
+    condition) or of a batch (arrays, one element and one random stream per flight, in order)."""
+    streams = [flight_streams(spec.seed, c.flight) for c in conditions]
+
+    def rngs(purpose: str):
+        chosen = [getattr(s, purpose) for s in streams]
+        return chosen if batch else chosen[0]
+
+    vehicle = VehicleParams.stack([c.vehicle for c in conditions]) if batch else conditions[0].vehicle
+    direction = np.array([c.wind_direction for c in conditions]) if batch else conditions[0].wind_direction
+    mean_speed = np.full(len(conditions), spec.wind_mean_speed_mps) if batch else spec.wind_mean_speed_mps
+    noise = None
+    if spec.sensor_noise:
+        noise = SensorNoise(_noise_levels(spec, 'std'), _noise_levels(spec, 'bias_std'),
+                            rngs('sensor_noise'), rngs('sensor_bias'))
+    wind = None
+    if spec.has_wind:
+        wind = Wind(physics_dt, mean_speed, direction, spec.turbulence,
+                    rngs('turbulence') if spec.turbulence != 'none' else None)
+    return Perturbations(
+        true_vehicle=vehicle, sensor_noise=noise,
+        delay=TransportDelay.from_seconds(spec.delay_s, control_dt) if spec.delay_s > 0.0 else None,
+        motor_lag=MotorLag(spec.motor_time_constant_s, physics_dt) if spec.motor_time_constant_s > 0.0 else None,
+        wind=wind)

@@ -1,0 +1,297 @@
+"""The campaign specification (``SPEC.yaml``): what to fly, how often, under which perturbations.
+
+Format (every key but ``scenario``, ``controllers`` and ``flights`` optional; a perturbation key
+left out means no such perturbation; other tools write these files, so the names are stable)::
+
+    scenario: paper            # any --scenario of run_stack.py
+    duration: 60               # [s] sim time per flight (default: the scenario's length)
+    settle_time: 5             # [s] metrics and failure checks start after it
+    controllers: [nnit2fsmc, smc-sign]
+    flights: 1000              # flights per controller; every controller flies the same ones
+    seed: 1                    # campaign seed: flight k's randomness depends only on (seed, k)
+    max_error_m: 1.0           # [m] a flight fails once its position error exceeds this after settling
+    disturbances: true         # the paper's section IV disturbances (default: as in the vehicle file)
+    vehicle:                   # true-vehicle perturbations (the controllers keep the nominal model)
+      mass: 0.3                #   a number = relative, uniform +-0.3 around the nominal value
+      inertia: {dist: normal, std: 0.1}   # or a relative normal (truncated at +-3 std)
+      drag: 0.25               #   Kfx Kfy Kfz Kfphi Kftheta Kfpsi, each drawn on its own
+      thrust_coefficient: 0.1  #   Kp of each rotor, on its own
+      drag_coefficient: 0.1    #   Kd of each rotor, on its own
+      cog_offset_m: 0.01       #   [m] absolute: centre of gravity uniform in +-0.01 m along body x and y
+      rotor_efficiency_loss: 0.1   # absolute: each rotor loses uniform [0, 0.1] of its thrust
+    wind: {mean_speed_mps: 3.0, turbulence: moderate}   # none | light | moderate | severe
+    sensor_noise: {position_m: 0.01, velocity_mps: 0.02, attitude_rad: 0.01, body_rate_radps: 0.02}
+    delay_s: 0.004             # [s] transport delay, a whole number of control steps
+    motor_time_constant_s: 0.03
+    control_rate_hz: 1000
+    physics_rate_hz: 1000      # a whole multiple of control_rate_hz (default: equal to it)
+
+``inertia`` draws Ix, Iy and Iz on their own. A distribution is a number (relative uniform half
+width), ``{dist: uniform, half_width: x}`` or ``{dist: normal, std: s}``; relative draws must keep a
+parameter positive (half width < 1, 3 std < 1). ``wind`` takes an optional ``direction_deg`` (the
+direction the wind blows towards, from +x (east) counter-clockwise; default: drawn uniformly per
+flight). ``sensor_noise`` entries are white-noise standard deviations, or ``{std: s, bias_std: b}``
+with a constant bias drawn per flight from N(0, b^2). An unknown key, a negative standard deviation,
+an empty controller list or ``flights: 0`` is refused before anything flies, naming the key.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from statistics import NormalDist
+from typing import Any, Mapping
+
+import yaml
+
+from nnit2fsmc_controller.factory import CONTROLLERS
+from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
+from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+
+#: spec key -> what it perturbs (documentation of the vehicle section)
+VEHICLE_KEYS = {
+    'mass': 'm, relative',
+    'inertia': 'Ix, Iy, Iz, each relative',
+    'drag': 'Kfx, Kfy, Kfz, Kfphi, Kftheta, Kfpsi, each relative',
+    'thrust_coefficient': 'Kp of each rotor, relative',
+    'drag_coefficient': 'Kd of each rotor, relative',
+    'cog_offset_m': 'centre of gravity along body x and y [m], absolute',
+    'rotor_efficiency_loss': 'lost thrust fraction of each rotor, absolute, in [0, value]',
+}
+TURBULENCE = ('none', 'light', 'moderate', 'severe')
+NOISE_KEYS = ('position_m', 'velocity_mps', 'attitude_rad', 'body_rate_radps')
+_STANDARD_NORMAL = NormalDist()
+TOP_KEYS = ('scenario', 'duration', 'settle_time', 'controllers', 'flights', 'seed', 'max_error_m',
+            'disturbances', 'vehicle', 'wind', 'sensor_noise', 'delay_s', 'motor_time_constant_s',
+            'control_rate_hz', 'physics_rate_hz')
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """A random draw around a nominal value: uniform(-half_width, half_width) or normal(0, std)
+    truncated at +-3 std."""
+
+    kind: str          #: 'uniform' or 'normal'
+    scale: float       #: half width (uniform) or standard deviation (normal), >= 0
+
+    def value(self, u: float) -> float:
+        """The draw for a standard uniform number u in [0, 1) (inverse transform sampling).
+
+        Every parameter takes exactly one uniform number whatever its distribution, so what one
+        spec key draws never shifts the draws of another.
+        """
+        if self.kind == 'uniform':
+            return self.scale * (2.0 * u - 1.0)
+        low, high = _STANDARD_NORMAL.cdf(-3.0), _STANDARD_NORMAL.cdf(3.0)
+        return self.scale * _STANDARD_NORMAL.inv_cdf(low + u * (high - low))
+
+    @property
+    def bound(self) -> float:
+        """Largest magnitude a draw can have."""
+        return self.scale if self.kind == 'uniform' else 3.0 * self.scale
+
+
+@dataclass(frozen=True)
+class NoiseLevel:
+    """White-noise standard deviation and per-flight bias standard deviation of one odometry part."""
+
+    std: float = 0.0
+    bias_std: float = 0.0
+
+
+@dataclass(frozen=True)
+class CampaignSpec:
+    """A validated ``SPEC.yaml`` (see the module docstring); SI units throughout."""
+
+    scenario: str
+    controllers: tuple[str, ...]
+    flights: int
+    duration: float
+    settle_time: float = 5.0
+    seed: int = 0
+    max_error_m: float = 1.0
+    disturbances: bool | None = None
+    vehicle: Mapping[str, Distribution] = field(default_factory=dict)
+    wind_mean_speed_mps: float = 0.0
+    wind_direction_deg: float | None = None
+    turbulence: str = 'none'
+    sensor_noise: Mapping[str, NoiseLevel] = field(default_factory=dict)
+    delay_s: float = 0.0
+    motor_time_constant_s: float = 0.0
+    control_rate_hz: float | None = None
+    physics_rate_hz: float | None = None
+    source: str = ''                     #: the YAML text it was read from (kept with the results)
+
+    @property
+    def has_wind(self) -> bool:
+        return self.wind_mean_speed_mps > 0.0 or self.turbulence != 'none'
+
+    def overridden(self, *, flights: int | None = None, seed: int | None = None,
+                   duration: float | None = None, controllers: list[str] | None = None) -> 'CampaignSpec':
+        """The spec with the command-line overrides applied and validated."""
+        spec = self
+        if flights is not None:
+            spec = replace(spec, flights=_flights(flights, '--flights'))
+        if seed is not None:
+            spec = replace(spec, seed=_seed(seed, '--seed'))
+        if controllers is not None:
+            spec = replace(spec, controllers=_controllers(controllers, '--controllers'))
+        if duration is not None:
+            spec = replace(spec, duration=check_number('--duration', duration, 0.0, low_inclusive=False))
+        _check_settling(spec, '--duration' if duration is not None else 'duration')
+        return spec
+
+    def to_mapping(self) -> dict:
+        """The spec as the YAML mapping that reproduces it (overrides included)."""
+        document: dict[str, Any] = {
+            'scenario': self.scenario, 'duration': self.duration, 'settle_time': self.settle_time,
+            'controllers': list(self.controllers), 'flights': self.flights, 'seed': self.seed,
+            'max_error_m': self.max_error_m}
+        if self.disturbances is not None:
+            document['disturbances'] = self.disturbances
+        if self.vehicle:
+            document['vehicle'] = {key: {'dist': d.kind, ('half_width' if d.kind == 'uniform' else 'std'): d.scale}
+                                   for key, d in self.vehicle.items()}
+        if self.has_wind:
+            document['wind'] = {'mean_speed_mps': self.wind_mean_speed_mps, 'turbulence': self.turbulence}
+            if self.wind_direction_deg is not None:
+                document['wind']['direction_deg'] = self.wind_direction_deg
+        if self.sensor_noise:
+            document['sensor_noise'] = {key: {'std': n.std, 'bias_std': n.bias_std}
+                                        for key, n in self.sensor_noise.items()}
+        for key in ('delay_s', 'motor_time_constant_s', 'control_rate_hz', 'physics_rate_hz'):
+            if getattr(self, key):
+                document[key] = getattr(self, key)
+        return document
+
+
+def _flights(value, key: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ParameterError(f'{key}: {value!r} is not a whole number of flights >= 1')
+    return value
+
+
+def _seed(value, key: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise ParameterError(f'{key}: {value!r} is not a whole number >= 0')
+    return value
+
+
+def _controllers(value, key: str) -> tuple[str, ...]:
+    if isinstance(value, str):
+        value = [name.strip() for name in value.split(',') if name.strip()]
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ParameterError(f'{key}: expected a non-empty list of controllers ({", ".join(CONTROLLERS)})')
+    for name in value:
+        if name not in CONTROLLERS:
+            raise ParameterError(f'{key}: {name!r} is not one of {", ".join(CONTROLLERS)}')
+    if len(set(value)) != len(value):
+        raise ParameterError(f'{key}: a controller is listed twice in {list(value)}')
+    return tuple(value)
+
+
+def _mapping(value, key: str, allowed) -> Mapping:
+    """``value`` checked to be a mapping of known keys; ``key`` is its place in the spec ('' at the top)."""
+    if not isinstance(value, Mapping):
+        raise ParameterError(f'{key or "spec"}: expected a mapping, got {value!r}')
+    for name in value:
+        if name not in allowed:
+            raise ParameterError(f'{key + "." if key else ""}{name}: unknown key (valid keys: {", ".join(allowed)})')
+    return value
+
+
+def _distribution(value, key: str, relative: bool) -> Distribution:
+    if isinstance(value, Mapping):
+        kind = value.get('dist', 'uniform')
+        if kind not in ('uniform', 'normal'):
+            raise ParameterError(f'{key}.dist: {kind!r} is not uniform or normal')
+        scale_key = 'half_width' if kind == 'uniform' else 'std'
+        _mapping(value, key, ('dist', scale_key))
+        if scale_key not in value:
+            raise ParameterError(f'{key}.{scale_key}: missing')
+        distribution = Distribution(kind, check_number(f'{key}.{scale_key}', value[scale_key], 0.0))
+    else:
+        distribution = Distribution('uniform', check_number(key, value, 0.0))
+    if relative and distribution.bound >= 1.0:
+        raise ParameterError(f'{key}: draws of up to +-{distribution.bound:g} (relative) could make the '
+                             'parameter zero or negative; keep the half width (or 3 std) below 1')
+    return distribution
+
+
+def _noise(value, key: str) -> NoiseLevel:
+    if isinstance(value, Mapping):
+        _mapping(value, key, ('std', 'bias_std'))
+        return NoiseLevel(check_number(f'{key}.std', value.get('std', 0.0), 0.0),
+                          check_number(f'{key}.bias_std', value.get('bias_std', 0.0), 0.0))
+    return NoiseLevel(check_number(key, value, 0.0))
+
+
+def _check_settling(spec: CampaignSpec, key: str) -> None:
+    if spec.duration <= spec.settle_time:
+        raise ParameterError(f'{key}: {spec.duration:g} s leaves nothing after the settling window '
+                             f'(settle_time {spec.settle_time:g} s)')
+
+
+def parse_spec(document: Any, source: str = '') -> CampaignSpec:
+    """Validate a spec mapping (see the module docstring); ParameterError names the offending key."""
+    top = _mapping(document if document is not None else {}, '', TOP_KEYS)
+    for required in ('scenario', 'controllers', 'flights'):
+        if required not in top:
+            raise ParameterError(f'{required}: missing (required keys: scenario, controllers, flights)')
+    scenario = top['scenario']
+    if scenario not in SCENARIOS:
+        raise ParameterError(f'scenario: {scenario!r} is not one of {", ".join(SCENARIOS)}')
+    duration = top.get('duration')
+    trajectory = make_scenario(scenario, duration)
+    vehicle = _mapping(top.get('vehicle', {}), 'vehicle', tuple(VEHICLE_KEYS))
+    wind = _mapping(top.get('wind', {}), 'wind', ('mean_speed_mps', 'turbulence', 'direction_deg'))
+    turbulence = wind.get('turbulence', 'none')
+    if turbulence not in TURBULENCE:
+        raise ParameterError(f'wind.turbulence: {turbulence!r} is not one of {", ".join(TURBULENCE)}')
+    noise = _mapping(top.get('sensor_noise', {}), 'sensor_noise', NOISE_KEYS)
+    disturbances = top.get('disturbances')
+    if disturbances is not None and not isinstance(disturbances, bool):
+        raise ParameterError(f'disturbances: expected true or false, got {disturbances!r}')
+    direction = wind.get('direction_deg')
+    spec = CampaignSpec(
+        scenario=scenario,
+        controllers=_controllers(top['controllers'], 'controllers'),
+        flights=_flights(top['flights'], 'flights'),
+        duration=trajectory.duration if duration is None else float(duration),
+        settle_time=check_number('settle_time', top.get('settle_time', 5.0), 0.0),
+        seed=_seed(top.get('seed', 0), 'seed'),
+        max_error_m=check_number('max_error_m', top.get('max_error_m', 1.0), 0.0, low_inclusive=False),
+        disturbances=disturbances,
+        vehicle={key: _distribution(value, f'vehicle.{key}', relative=key not in ('cog_offset_m',
+                                                                                   'rotor_efficiency_loss'))
+                 for key, value in vehicle.items()},
+        wind_mean_speed_mps=check_number('wind.mean_speed_mps', wind.get('mean_speed_mps', 0.0), 0.0),
+        wind_direction_deg=None if direction is None else check_number('wind.direction_deg', direction),
+        turbulence=turbulence,
+        sensor_noise={key: _noise(value, f'sensor_noise.{key}') for key, value in noise.items()},
+        delay_s=check_number('delay_s', top.get('delay_s', 0.0), 0.0, 1.0),
+        motor_time_constant_s=check_number('motor_time_constant_s', top.get('motor_time_constant_s', 0.0), 0.0, 1.0),
+        control_rate_hz=(None if 'control_rate_hz' not in top
+                         else check_number('control_rate_hz', top['control_rate_hz'], 0.0, 1e5, low_inclusive=False)),
+        physics_rate_hz=(None if 'physics_rate_hz' not in top
+                         else check_number('physics_rate_hz', top['physics_rate_hz'], 0.0, 1e6, low_inclusive=False)),
+        source=source)
+    if 'rotor_efficiency_loss' in spec.vehicle and spec.vehicle['rotor_efficiency_loss'].bound >= 1.0:
+        raise ParameterError('vehicle.rotor_efficiency_loss: a rotor cannot lose all of its thrust; keep it below 1')
+    _check_settling(spec, 'duration')
+    return spec
+
+
+def load_spec(path: str | Path) -> CampaignSpec:
+    """Read and validate a ``SPEC.yaml``; errors name the file and the key."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+        document = yaml.safe_load(text)
+    except OSError as error:
+        raise ParameterError(f'campaign spec {path}: {error.strerror}') from error
+    except yaml.YAMLError as error:
+        raise ParameterError(f'campaign spec {path}: not valid YAML ({error})') from error
+    try:
+        return parse_spec(document, text)
+    except ParameterError as error:
+        raise ParameterError(f'campaign spec {path}: {error}') from error

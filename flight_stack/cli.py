@@ -1,0 +1,455 @@
+"""Fly the NNIT2FSMC flight stack: trajectory -> controller -> simulator, then summarise the flight.
+
+Backends:
+  embedded  the three cores stepped in lockstep in this process (no ROS needed)
+  ros       each ROS 2 node in its own process, over real topics (needs rclpy)
+The default (auto) is ros when rclpy can be imported, else embedded.
+
+Every setting is checked before anything is flown or written. A run writes into a folder beside
+OUT (OUT.incomplete-XXXXXXXX) and moves into OUT only once it is complete, so an interrupted or
+broken run never touches an earlier result (what it wrote stays in that folder); an earlier run in
+OUT is replaced only with --overwrite. A flight that fails its checks (result FAILED, exit 1) is a
+complete run: its summary, bag and report are kept in OUT.
+
+Examples:
+  python3 run_stack.py                                   # the paper's flight, NNIT2FSMC
+  python3 run_stack.py --controller smc-sign --no-disturbances --out out/sign
+  python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
+
+Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
+  python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
+  python3 run_stack.py recover BAG                       # finalize the bag of a killed recording
+  python3 run_stack.py rosbag2-qos --namespace quad > qos.yaml   # for your own `ros2 bag record
+                                                         #   --qos-profile-overrides-path qos.yaml`
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import signal
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+#: third-party modules the stack imports -> the distribution that provides them
+DEPENDENCIES = {'numpy': 'numpy', 'yaml': 'PyYAML', 'rosbags': 'rosbags', 'mcap': 'mcap', 'zstandard': 'zstandard',
+                'matplotlib': 'matplotlib'}
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    from nnit2fsmc_controller.factory import CONTROLLERS
+    from nnit2fsmc_controller.trajectory import SCENARIOS
+    from quad_msgs_bridge.contract import RECORDED_TOPICS
+
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--backend', choices=('auto', 'ros', 'embedded'), default='auto')
+    parser.add_argument('--controller', choices=CONTROLLERS, default='nnit2fsmc')
+    parser.add_argument('--scenario', choices=tuple(SCENARIOS), default='paper')
+    parser.add_argument('--duration', type=float, default=None,
+                        help='sim time to fly [s] (default: the scenario\'s length)')
+    parser.add_argument('--disturbances', action=argparse.BooleanOptionalAction, default=None,
+                        help='paper section IV disturbances (default: as in the vehicle file, on)')
+    parser.add_argument('--seed', type=int, default=0, help='seed of the NN initial weights, 0 to 2^31 - 1')
+    parser.add_argument('--out', type=Path, default=None,
+                        help='output folder (default out/<scenario>-<controller>); see above for what a run leaves')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='replace an earlier run in --out (its summary, bag, report, plots; other files stay) '
+                             'and an existing --bag')
+    parser.add_argument('--vehicle', type=Path, default=None, help='vehicle YAML (default: the packaged one)')
+    parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
+    parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz], a multiple of the control rate')
+    parser.add_argument('--settle-time', type=float, default=None,
+                        help='metrics ignore the first S seconds (default: 5, or half of a flight shorter than 10 s)')
+    parser.add_argument('--max-error', type=float, default=1.0,
+                        help='the flight fails if the position error after settling exceeds this [m] (> 0)')
+    parser.add_argument('--quiet', action='store_true', help='no progress lines')
+    parser.add_argument('--namespace', default=None,
+                        help='ROS backend: namespace of the vehicle (default quad), or of a fleet\'s vehicles '
+                             '(default: the root namespace)')
+    parser.add_argument('--vehicles', type=int, default=1, metavar='N',
+                        help='ROS backend: fly N vehicles on one sim clock, uav1..uavN, each its own copy of the '
+                             'scenario shifted 3 m along y from the previous one')
+    parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
+                        help='ROS backend: lockstep (deterministic) or realtime simulation')
+    parser.add_argument('--speed-factor', type=float, default=None,
+                        help='sim s per wall s (default 1: real time) of the ROS backend\'s realtime mode and of '
+                             'the --live view; with --live 0 flies as fast as it can')
+    parser.add_argument('--extra-subscribers', type=int, default=0, metavar='N',
+                        help='ROS backend: the simulator also waits for N more odom subscribers before it starts '
+                             '(your own `ros2 bag record`, RViz), so they miss nothing of a lockstep flight')
+    parser.add_argument('--bag', type=Path, default=None,
+                        help='record the flight into this rosbag2 (MCAP) folder (default OUT/bag); '
+                             'then review it into OUT (report.html, plots/)')
+    parser.add_argument('--no-bag', action='store_true', help='record no bag (and write no report)')
+    parser.add_argument('--topics', nargs='+', default=None, metavar='TOPIC',
+                        help='contract topics to record (default: all of '
+                             + ' '.join(t.name for t in RECORDED_TOPICS) + ')')
+    live = parser.add_argument_group('live view (embedded backend; see the README, "Live view")')
+    live.add_argument('--live', action='store_true',
+                      help='serve the flight to Foxglove as it flies (Foxglove WebSocket protocol), paced at '
+                           '--speed-factor')
+    live.add_argument('--live-host', default='127.0.0.1',
+                      help='address the live view listens on (default %(default)s: this machine only)')
+    live.add_argument('--live-port', type=int, default=8765,
+                      help='port of the live view (default %(default)s; 0: any free port)')
+    live.add_argument('--live-wait', action='store_true',
+                      help='start flying once a client has subscribed to a topic (so that it misses nothing)')
+    return parser.parse_args(argv)
+
+
+@contextlib.contextmanager
+def stop_signals():
+    """SIGINT (Ctrl-C) and SIGTERM, noted rather than raised: yields ``stop()``, true once one came.
+
+    The embedded flight checks it between two control steps, so a signal never lands in the
+    middle of a message being added to the bag (a KeyboardInterrupt there once left a message
+    counted in the bag's index that was not in its chunk).
+    """
+    received: list[int] = []
+    previous = {number: signal.signal(number, lambda signum, frame: received.append(signum))
+                for number in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield lambda: bool(received)
+    finally:
+        for number, handler in previous.items():
+            signal.signal(number, handler)
+
+
+def choose_backend(requested: str, live: bool) -> str:
+    if requested != 'auto':
+        return requested
+    if live:
+        return 'embedded'
+    try:
+        import rclpy  # noqa: F401
+    except ImportError:
+        print('backend: embedded (rclpy cannot be imported: source /opt/ros/jazzy/setup.bash for the ROS backend)')
+        return 'embedded'
+    return 'ros'
+
+
+def check_live_options(args, backend: str) -> float:
+    """The speed factor of an embedded flight (0: as fast as it can), after checking the live-view options."""
+    from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+    if backend == 'ros':
+        if args.live:
+            raise ParameterError('--live serves the embedded flight; for the ROS backend use Foxglove\'s ROS 2 '
+                                 'bridge (sudo apt install ros-jazzy-foxglove-bridge; ros2 launch foxglove_bridge '
+                                 'foxglove_bridge_launch.xml), or add --backend embedded')
+        return 0.0
+    if not args.live:
+        if args.live_wait:
+            raise ParameterError('--live-wait: waits for a client of the live view; add --live')
+        if args.speed_factor is not None:
+            raise ParameterError('--speed-factor: the embedded flight is paced only with --live (without it, it '
+                                 'flies as fast as it can)')
+        return 0.0
+    check_number('--live-port', args.live_port, 0, 65535)
+    return check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor, 0.0, 1000.0)
+
+
+def start_live_server(host: str, port: int):
+    """The live view's server, or an exit code after saying why it cannot be served."""
+    try:
+        from flight_stack.live_view import LiveServer, LiveViewError, is_loopback
+    except ImportError as error:   # foxglove-sdk is in requirements.txt, not in the ROS path's requirements
+        print(f'error: --live needs the foxglove-sdk package ({error}): pip install -r requirements.txt',
+              file=sys.stderr)
+        return 2
+    try:
+        server = LiveServer(host, port)
+    except LiveViewError as error:
+        print(f'error: {error} (--live-host, --live-port)', file=sys.stderr)
+        return 2
+    print(f'live view: {server.url} (Foxglove: Open connection -> Foxglove WebSocket -> {server.url})', flush=True)
+    if not is_loopback(host):
+        print(f'warning: the live view listens on {host}: anyone who can reach this address can watch the flight '
+              f'(there is no authentication)', flush=True)
+    return server
+
+
+def live_sinks(server, params, topics, speed_factor: float) -> list:
+    """The step sinks of a live flight: a pacer (unless as fast as possible), then the live view."""
+    from flight_stack.live_view import LiveView
+    from flight_stack.pacing import Pacer
+    return ([Pacer(speed_factor)] if speed_factor > 0.0 else []) + [LiveView(server, params, topics=topics)]
+
+
+class FlightStopped(Exception):
+    """The flight did not finish; the message says why, ``code`` is the exit status."""
+
+    def __init__(self, message: str, code: int):
+        super().__init__(message)
+        self.code = code
+
+
+@dataclass
+class Flown:
+    """A finished flight: its record, for the summary, and (with a bag) the flight to review."""
+
+    record: object                  #: quad_msgs_bridge.review.metrics.FlightRecord
+    wall_time_s: float
+    flight: object = None           #: quad_msgs_bridge.review.flight_from_bag.BagFlight, None without a bag
+    extra: dict = field(default_factory=dict)
+    failure: str | None = None      #: why the flight ended early (flight_stack.closed_loop.FAILURES), if it did
+
+
+def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_server=None,
+             speed_factor: float = 0.0, live_wait: bool = False) -> Flown:
+    """The embedded backend; with ``bag``, the flight to review is the record in memory (what the bag holds)."""
+    from flight_stack.closed_loop import FailureRules
+    from flight_stack.embedded import fly_embedded
+    from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
+    from quad_msgs_bridge.review.flight_from_bag import BagFlight
+
+    with stop_signals() as stop, live_server or contextlib.nullcontext():
+        sinks = live_sinks(live_server, plan.params, plan.topics, speed_factor) if live_server else []
+        if live_server and live_wait:
+            print('live view: waiting for a client to subscribe (Ctrl-C to stop)', flush=True)
+            if not live_server.wait_for_subscriber(stop):
+                raise KeyboardInterrupt('stopped before the flight')
+        recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
+                                      controller=plan.controller, scenario=plan.scenario, backend='embedded',
+                                      seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled))
+                     if bag else contextlib.nullcontext())
+        with recording as written:
+            result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
+                                  plan.duration, plan.physics_rate, progress=progress, bag=written, stop=stop,
+                                  sinks=sinks, rules=FailureRules(plan.settle_time, max_error=math.inf))
+            for sink in sinks:
+                sink.close()
+    flight = (BagFlight(bag_shown, plan.controller, result.record, plan.params, plan.settle_time,
+                        dict(written.writer.custom_data)) if bag else None)
+    return Flown(result.record, result.wall_time_s, flight, failure=result.failure)
+
+
+def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str, Flown]]:
+    """Every node in its own process; per vehicle (its namespace, its flight) read from the bag the recorder
+    node wrote: one, or a fleet (flight_stack.fleet)."""
+    from flight_stack.fleet import fleet_layout
+    from flight_stack.ros_backend import RosFlightConfig, fly_ros
+    from quad_msgs_bridge.bag.timing import message_timing
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
+
+    vehicles = fleet_layout(args.vehicles, args.namespace)
+    result = fly_ros(RosFlightConfig(
+        vehicles=vehicles, controller=plan.controller, scenario=plan.scenario, duration=plan.duration,
+        disturbances=plan.disturbances.enabled, seed=plan.seed, physics_rate=plan.physics_rate,
+        control_rate=plan.control_rate, bag=bag,
+        topics=[t.name for t in plan.topics], mode=args.mode, speed_factor=args.speed_factor,
+        extra_odom_subscribers=args.extra_subscribers, vehicle_file=args.vehicle, gains_file=args.gains,
+        settle_time=plan.settle_time, quiet=args.quiet))
+    if result.failed_node:
+        raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
+                            + (f'; the bag is closed: {bag}' if bag_shown else ''),
+                            130 if result.failed_node == 'interrupted' else 1)
+    flights = []
+    for vehicle in vehicles:
+        try:
+            flight = read_flight(bag, namespace=vehicle.namespace, vehicle_file=args.vehicle,
+                                 settle_time=plan.settle_time)
+            timing = message_timing(bag, vehicle.namespace)
+        except ValueError as error:
+            raise FlightStopped(f'cannot summarise the flight of {vehicle.namespace} from {bag}: {error}', 1) \
+                from error
+        flight.path = bag_shown
+        extra = {'ros': {'namespace': vehicle.namespace, 'mode': args.mode,
+                         'simulator': result.sim_report.split('] ')[-1], 'timing': timing},
+                 **({'offset_m': list(vehicle.offset)} if len(vehicles) > 1 else {})}
+        flights.append((vehicle.namespace, Flown(flight.record, result.wall_time_s, flight if bag_shown else None,
+                                                 extra)))
+    return flights
+
+
+def print_ros_lines(summary: dict) -> None:
+    if 'ros' not in summary:
+        return
+    print(f'  ROS: {summary["ros"]["simulator"]}')
+    timing = summary['ros'].get('timing', {})
+    if 'latency_median_ms' in timing:
+        print(f'  ROS: odometry at {timing["odometry_rate_hz"]:.1f} Hz, odom->forces latency median '
+              f'{timing["latency_median_ms"]:.3f} ms, p99 {timing["latency_p99_ms"]:.3f} ms')
+
+
+def review_now(flown: Flown, plan, out: Path) -> tuple[list[str], str | None]:
+    """Review the flight into ``out`` (staged): (lines to print, report name) or a reason it was skipped."""
+    from quad_msgs_bridge.review.command import review_flights
+    from quad_msgs_bridge.review.flight_from_bag import NEEDED_TOPICS
+
+    missing = [spec.name for spec in NEEDED_TOPICS if spec not in plan.topics]
+    if missing:   # the report must describe what `review BAG` finds in the bag
+        return [f'review skipped: the bag does not record {", ".join(missing)}'], None
+    review = review_flights([flown.flight], out)
+    return [f'note: {note}' for note in review.notes], review.report.name
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``run_stack.py`` (and the ``nnit2fsmc-stack`` command): a flight, or a bag tool; the exit status."""
+    try:
+        return run(sys.argv[1:] if argv is None else argv)
+    except ModuleNotFoundError as error:
+        top = (error.name or '').split('.')[0]
+        if top not in DEPENDENCIES:
+            raise
+        print(f'error: the Python package {DEPENDENCIES[top]} (module {top}) is not installed for {sys.executable}.\n'
+              '  From a clone, run the stack in its virtual environment: bash scripts/fly.sh [OPTIONS] (creates\n'
+              '  .venv), or .venv/bin/python run_stack.py [OPTIONS] once `bash scripts/setup_venv.sh .venv\n'
+              '  requirements.txt` made it; or install the stack: pip install .', file=sys.stderr)
+        return 2
+
+
+def run(argv: list[str]) -> int:
+    if argv[:1] == ['review']:
+        from quad_msgs_bridge.review.command import main as review_main
+        return review_main(argv[1:])
+    if argv[:1] == ['recover']:
+        from quad_msgs_bridge.bag.recover import recover_main
+        return recover_main(argv[1:])
+    if argv[:1] == ['rosbag2-qos']:
+        from quad_msgs_bridge.bag.metadata import qos_overrides_main
+        return qos_overrides_main(argv[1:])
+    if argv[:1] == ['campaign']:
+        from flight_stack.campaign.cli import main as campaign_main
+        return campaign_main(argv[1:])
+    args = parse_args(argv)
+    from flight_stack.fleet import MAX_VEHICLES
+    from flight_stack.output import RunOutput
+    from flight_stack.plan import plan_flight
+    from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+    try:
+        plan = plan_flight(args.controller, args.scenario, duration=args.duration, disturbances=args.disturbances,
+                           seed=args.seed, vehicle_file=args.vehicle, gains_file=args.gains,
+                           physics_rate=args.physics_rate, settle_time=args.settle_time, max_error=args.max_error,
+                           topics=args.topics)
+        check_number('--extra-subscribers', args.extra_subscribers, 0.0, 100.0)
+        check_number('--vehicles', args.vehicles, 1, MAX_VEHICLES)
+        backend = choose_backend(args.backend, args.live)
+        if backend == 'embedded' and args.vehicles > 1:
+            raise ParameterError('--vehicles: a fleet flies on the ROS backend (--backend ros)')
+        speed_factor = check_live_options(args, backend)
+        if backend == 'ros':
+            args.speed_factor = check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor,
+                                             0.0, low_inclusive=False)
+        out_dir = args.out or Path('out') / f'{args.scenario}-{args.controller}'
+        bag_shown = None if args.no_bag else args.bag or out_dir / 'bag'
+        output = RunOutput(out_dir, bag_shown, args.overwrite)
+    except ParameterError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    live_server = start_live_server(args.live_host, args.live_port) if args.live else None
+    if isinstance(live_server, int):
+        return live_server
+    try:
+        output.create()
+    except ParameterError as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    print(f'flying {plan.controller} on "{plan.scenario}" for {plan.duration:g} s '
+          f'(disturbances {"on" if plan.disturbances.enabled else "off"}), {backend} backend'
+          + (f', {args.vehicles} vehicles' if args.vehicles > 1 else ''))
+    try:
+        return fly_and_report(args, plan, backend, output, bag_shown, live_server, speed_factor)
+    except BaseException:
+        output.keep_partial()
+        raise
+
+
+def unfinished(output, message: str, code: int) -> int:
+    """A run that did not finish: say why; what it wrote stays in its staging folder, OUT is unchanged."""
+    kept = output.keep_partial()
+    print(message + ''.join(f'\nthe unfinished run stays in {folder}' for folder in kept)
+          + f'\n{output.out_dir} is unchanged', file=sys.stderr)
+    return code
+
+
+def summarize(flown: Flown, plan, backend: str) -> dict:
+    """The summary of a flown flight (metrics, outcome, settings)."""
+    from flight_stack.summary import build_summary
+    summary = build_summary(flown.record, backend=backend, controller=plan.controller, scenario=plan.scenario,
+                            seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
+                            disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
+                            wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure)
+    summary.update(flown.extra)
+    return summary
+
+
+def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = False, vehicle=None, gains=None,
+               **settings) -> dict:
+    """One embedded flight without the command line (flight_stack.api.fly): its summary; with ``out``
+    the run is written there as the command writes it. ParameterError before flying on a bad setting."""
+    from flight_stack.output import RunOutput
+    from flight_stack.plan import plan_flight
+    from flight_stack.summary import write_summary
+    plan = plan_flight(controller, scenario, vehicle_file=vehicle, gains_file=gains, **settings)
+    if out is None:
+        return summarize(fly_here(plan, None, None), plan, 'embedded')
+    out = Path(out)
+    output = RunOutput(out, out / 'bag', overwrite)
+    output.create()
+    try:
+        flown = fly_here(plan, output.bag, out / 'bag')
+        summary = summarize(flown, plan, 'embedded')
+        write_summary(summary, output.out)
+        review_now(flown, plan, output.out)
+        output.commit()
+    except BaseException:
+        output.keep_partial()
+        raise
+    return summary
+
+
+def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, live_server=None,
+                   speed_factor: float = 0.0) -> int:
+    """Fly, write summary and review into the staged output, then move it into place."""
+    from flight_stack.summary import format_summary, write_summary
+    from quad_msgs_bridge.bag.mcap_file import BagWriteError
+
+    try:
+        if backend == 'ros':
+            with tempfile.TemporaryDirectory(prefix='nnit2fsmc-') as scratch:   # --no-bag: the bag is read, then goes
+                flights = fly_on_ros(args, plan, output.bag or Path(scratch) / 'bag', bag_shown)
+        else:
+            flights = [(None, fly_here(plan, output.bag, bag_shown, not args.quiet, live_server, speed_factor,
+                                       args.live_wait))]
+    except KeyboardInterrupt:
+        return unfinished(output, 'interrupted' + (f'; bag closed: {output.bag}' if output.bag else ''), 130)
+    except FlightStopped as stopped:
+        return unfinished(output, f'error: {stopped}', stopped.code)
+    except BagWriteError as error:
+        return unfinished(output, f'error: {error}', 1)
+    if len(flights) > 1:
+        return report_fleet(flights, plan, output, bag_shown)
+    [(_, flown)] = flights
+    summary = summarize(flown, plan, backend)
+    write_summary(summary, output.out)
+    review_lines, report = review_now(flown, plan, output.out) if flown.flight is not None else ([], None)
+    output.commit()
+    print(format_summary(summary))
+    print_ros_lines(summary)
+    print(f'summary: {output.out_dir / "summary.json"}')
+    if bag_shown:
+        print(f'bag: {bag_shown}')
+    for line in review_lines:
+        print(line)
+    if report:
+        print(f'report: {output.out_dir / report}')
+    return 0 if summary['flight_ok'] else 1
+
+
+def report_fleet(flights: list[tuple[str, Flown]], plan, output, bag_shown: Path | None) -> int:
+    """A fleet's summary (one row per vehicle, summary.json ``vehicles.<name>``), moved into place; the exit status."""
+    from flight_stack.fleet import fleet_summary, format_fleet_summary
+    from flight_stack.summary import write_summary
+
+    fleet = fleet_summary({name: summarize(flown, plan, 'ros') for name, flown in flights})
+    write_summary(fleet, output.out)
+    output.commit()
+    print(format_fleet_summary(fleet))
+    print(f'summary: {output.out_dir / "summary.json"}')
+    if bag_shown:
+        print(f'bag: {bag_shown} (every vehicle; review one: run_stack.py review {bag_shown} --namespace '
+              f'{flights[0][0]})')
+    return 0 if fleet['flight_ok'] else 1

@@ -1,0 +1,168 @@
+"""The campaign command: the same rows whatever the workers (local processes or a Dask cluster),
+nothing lost on Ctrl-C, --resume flies only what is missing, --replay equals its row."""
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from flight_stack.campaign.results import read_flights, wilson_interval
+from flight_stack.campaign.runner import RunOptions, run_campaign
+from flight_stack.campaign.spec import parse_spec
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+ROOT = Path(__file__).resolve().parent.parent
+DOCUMENT = {
+    'scenario': 'paper', 'duration': 1.6, 'settle_time': 1.2, 'controllers': ['nnit2fsmc', 'pid'], 'flights': 5,
+    'seed': 2, 'control_rate_hz': 250,
+    'vehicle': {'mass': 0.05, 'inertia': 0.05, 'cog_offset_m': 0.0005},
+    'wind': {'mean_speed_mps': 0.5, 'turbulence': 'light'},
+    'sensor_noise': {'position_m': 0.0005, 'attitude_rad': 0.0005},
+    'delay_s': 0.004, 'motor_time_constant_s': 0.01,
+}
+SPEC = parse_spec(DOCUMENT)
+
+
+def rows_by_key(out_dir: Path) -> dict:
+    return {(r['flight'], r['controller']): r for r in read_flights(out_dir / 'flights.csv')}
+
+
+def assert_same_rows(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for key in a:
+        for column, value in a[key].items():
+            other = b[key][column]
+            assert value == other or (isinstance(value, float) and math.isnan(value) and math.isnan(other)), \
+                (key, column, value, other)
+
+
+@pytest.fixture(scope='module')
+def reference_run(tmp_path_factory):
+    """The campaign on one local worker, one flight per batch."""
+    out = tmp_path_factory.mktemp('one-worker')
+    run_campaign(SPEC, out, RunOptions(workers=1, batch_size=1, progress=False))
+    return out
+
+
+def test_the_outputs_hold_every_flight_and_the_summary(reference_run):
+    rows = rows_by_key(reference_run)
+    assert set(rows) == {(k, c) for k in range(5) for c in ('nnit2fsmc', 'pid')}
+    summary = json.loads((reference_run / 'campaign.json').read_text())
+    for controller in ('nnit2fsmc', 'pid'):
+        entry = summary['controllers'][controller]
+        mine = [r for r in rows.values() if r['controller'] == controller]
+        finished = [r['rmse_position_m'] for r in mine if r['finished']]
+        assert entry['flights'] == 5 and entry['finished'] == len(finished)
+        assert entry['success_rate_wilson95'] == pytest.approx(list(wilson_interval(len(finished), 5)))
+        assert entry['rmse_position_m']['max'] == pytest.approx(max(finished))
+    report = (reference_run / 'report.html').read_text()
+    assert 'rmse_cdf.png' in report and (reference_run / 'plots' / 'rmse_cdf.png').exists()
+    assert yaml.safe_load((reference_run / 'spec.yaml').read_text()) == SPEC.to_mapping()
+
+
+def test_wilson_interval_matches_the_formula_by_hand():
+    # 95 of 100, z = 1.96: centre (0.95 + 0.019208) / 1.038416 = 0.933352,
+    # half 1.96 sqrt(0.000475 + 0.00009604) / 1.038416 = 0.045104
+    low, high = wilson_interval(95, 100)
+    assert low == pytest.approx(0.888248, abs=2e-5) and high == pytest.approx(0.978456, abs=2e-5)
+    assert wilson_interval(0, 10)[0] == pytest.approx(0.0, abs=1e-15)
+    assert wilson_interval(10, 10)[1] == pytest.approx(1.0, abs=1e-15)
+    assert wilson_interval(10, 10)[0] == pytest.approx(10 / (10 + 1.96 ** 2), abs=1e-3)
+
+
+def test_two_workers_and_other_batches_give_the_same_rows(reference_run, tmp_path):
+    run_campaign(SPEC, tmp_path, RunOptions(workers=2, batch_size=3, progress=False))
+    assert_same_rows(rows_by_key(reference_run), rows_by_key(tmp_path))
+
+
+def test_a_dask_cluster_gives_the_same_rows(reference_run, tmp_path):
+    distributed = pytest.importorskip('distributed')
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host='127.0.0.1',
+                                  dashboard_address=None) as cluster:
+        run_campaign(SPEC, tmp_path, RunOptions(scheduler=cluster.scheduler_address, batch_size=2, progress=False))
+    assert_same_rows(rows_by_key(reference_run), rows_by_key(tmp_path))
+
+
+def test_an_existing_campaign_is_only_continued_with_resume(reference_run, tmp_path):
+    with pytest.raises(ParameterError, match='--resume'):
+        run_campaign(SPEC, reference_run, RunOptions(workers=1, progress=False))
+    other = SPEC.overridden(seed=3)
+    with pytest.raises(ParameterError, match='another spec'):
+        run_campaign(other, reference_run, RunOptions(workers=1, resume=True, progress=False))
+
+
+def run_cli(*args, **kwargs):
+    return subprocess.Popen([sys.executable, str(ROOT / 'run_stack.py'), 'campaign', *map(str, args)],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+
+
+def test_ctrl_c_keeps_every_finished_batch_and_resume_flies_the_rest(reference_run, tmp_path):
+    spec_file = tmp_path / 'spec.yaml'
+    spec_file.write_text(yaml.safe_dump(DOCUMENT))
+    out = tmp_path / 'out'
+    process = run_cli(spec_file, '--out', out, '--workers', 1, '--batch-size', 1, '--quiet')
+    deadline = time.monotonic() + 120
+    while len(read_flights(out / 'flights.csv')) < 2 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130, stderr
+    assert 'rerun with --resume' in stderr
+    kept = rows_by_key(out)
+    assert 2 <= len(kept) < 10
+    reference = rows_by_key(reference_run)
+    assert_same_rows(kept, {key: reference[key] for key in kept})
+    resumed = run_cli(spec_file, '--out', out, '--workers', 2, '--resume', '--quiet')
+    stdout, stderr = resumed.communicate(timeout=600)
+    assert resumed.returncode == 0, stderr
+    assert f'flew {10 - len(kept)} flights' in stderr
+    assert_same_rows(reference, rows_by_key(out))
+
+
+def test_replay_flies_one_flight_on_the_embedded_path_with_its_row_s_metrics(reference_run):
+    from flight_stack.campaign.replay import replay_flight
+    status = replay_flight(SPEC, reference_run, 3, RunOptions(progress=False))
+    rows = rows_by_key(reference_run)
+    for controller in ('nnit2fsmc', 'pid'):
+        target = reference_run / 'replay-3' / controller
+        summary = json.loads((target / 'summary.json').read_text())
+        row = rows[(3, controller)]
+        assert summary['flight_ok'] == row['finished']
+        for key in ('rmse_position_m', 'max_position_error_m', 'rmse_yaw_rad', 'saturation_fraction'):
+            assert summary[key] == pytest.approx(row[key], rel=1e-9, abs=1e-12), key
+        for i in range(1, 5):
+            assert summary['chattering'][f'U{i}'] == pytest.approx(row[f'chattering_U{i}'], rel=1e-9, abs=1e-12)
+        assert (target / 'bag' / 'metadata.yaml').exists() and (target / 'report.html').exists()
+        review = json.loads((target / 'review.json').read_text())[0]
+        assert review['rmse_position_m'] == pytest.approx(summary['rmse_position_m'], rel=1e-12)
+    assert status == (0 if all(rows[(3, c)]['finished'] for c in ('nnit2fsmc', 'pid')) else 1)
+
+
+@pytest.mark.parametrize('args, message', [
+    (['--flights', '0'], '--flights'), (['--workers', '0'], '--workers'), (['--batch-size', '-2'], '--batch-size'),
+    (['--controllers', 'pid,lqr'], '--controllers'), (['--replay', '99'], '--replay')])
+def test_bad_options_are_refused_before_flying(tmp_path, args, message):
+    spec_file = tmp_path / 'spec.yaml'
+    spec_file.write_text(yaml.safe_dump(DOCUMENT))
+    process = run_cli(spec_file, '--out', tmp_path / 'out', *args)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 2 and stderr.startswith(f'error: {message}'), stderr
+    assert not (tmp_path / 'out' / 'flights.csv').exists()
+
+
+def test_a_campaign_without_perturbations_reports_cleanly(tmp_path):
+    """Every flight identical (nothing random): the summary and the plots still come out."""
+    spec = parse_spec({'scenario': 'hover', 'duration': 1.0, 'settle_time': 0.6, 'controllers': ['pid'],
+                       'flights': 2, 'control_rate_hz': 250})
+    run_campaign(spec, tmp_path, RunOptions(workers=1, progress=False))
+    rows = list(rows_by_key(tmp_path).values())
+    assert rows[0]['rmse_position_m'] == rows[1]['rmse_position_m']
+    summary = json.loads((tmp_path / 'campaign.json').read_text())
+    assert summary['controllers']['pid']['rmse_position_m']['p50'] == pytest.approx(rows[0]['rmse_position_m'])
+    assert (tmp_path / 'plots' / 'boxplots.png').exists()

@@ -1,0 +1,146 @@
+"""The output folder of a run: staged beside its target, moved into place only when complete, nothing
+earlier lost (flight_stack.output)."""
+import os
+import stat
+
+import pytest
+
+from flight_stack.output import STAGING_MARK, RunOutput
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+
+def snapshot(folder):
+    """{relative path: bytes} of every file under ``folder``."""
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob('*')) if p.is_file()}
+
+
+def earlier_run(folder):
+    folder.mkdir(parents=True)
+    (folder / 'summary.json').write_text('{"old": true}')
+    (folder / 'report.html').write_text('old report')
+    (folder / 'bag').mkdir()
+    (folder / 'bag' / 'metadata.yaml').write_text('old bag')
+    (folder / 'notes.txt').write_text('the user\'s own file')
+    return snapshot(folder)
+
+
+def staging_folders(parent):
+    return sorted(p.name for p in parent.iterdir() if STAGING_MARK in p.name)
+
+
+def test_a_new_folder_appears_only_at_commit(tmp_path):
+    out = tmp_path / 'runs' / 'first'
+    output = RunOutput(out, out / 'bag', overwrite=False)
+    assert not (tmp_path / 'runs').exists()          # checking touches nothing
+    output.create()
+    (output.out / 'summary.json').write_text('new')
+    output.bag.mkdir()
+    (output.bag / 'bag_0.mcap').write_bytes(b'x')
+    assert not out.exists() and output.out.parent == out.parent and STAGING_MARK in output.out.name
+    output.commit()
+    assert snapshot(out) == {'summary.json': b'new', 'bag/bag_0.mcap': b'x'}
+    assert staging_folders(out.parent) == []
+    umask = os.umask(0)
+    os.umask(umask)
+    assert stat.S_IMODE(out.stat().st_mode) == 0o777 & ~umask    # not the 0700 of a private temporary folder
+
+
+def test_an_earlier_run_is_refused_without_overwrite_and_untouched(tmp_path):
+    out = tmp_path / 'run'
+    before = earlier_run(out)
+    with pytest.raises(ParameterError, match=r'--out: .* holds an earlier run \(summary.json, report.html, bag\); '
+                                             r'pass --overwrite'):
+        RunOutput(out, out / 'bag', overwrite=False)
+    assert snapshot(out) == before and staging_folders(tmp_path) == []
+
+
+def test_overwrite_replaces_the_run_files_once_the_run_is_complete(tmp_path):
+    out = tmp_path / 'run'
+    before = earlier_run(out)
+    output = RunOutput(out, None, overwrite=True)
+    output.create()
+    (output.out / 'summary.json').write_text('new')
+    assert snapshot(out) == before                   # still the earlier run while the new one is written
+    output.commit()
+    # the new run had no bag and no report: the earlier ones go too (they would not match the new summary);
+    # the user's own file stays
+    assert snapshot(out) == {'summary.json': b'new', 'notes.txt': b"the user's own file"}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['run']
+
+
+def test_an_unfinished_run_keeps_what_it_wrote_beside_the_earlier_run(tmp_path):
+    out = tmp_path / 'run'
+    before = earlier_run(out)
+    output = RunOutput(out, out / 'bag', overwrite=True)
+    output.create()
+    output.bag.mkdir()
+    (output.bag / 'bag_0.mcap').write_bytes(b'partial')
+    kept = output.keep_partial()
+    assert kept == [output.out] and (kept[0] / 'bag' / 'bag_0.mcap').read_bytes() == b'partial'
+    assert snapshot(out) == before
+
+
+def test_an_unfinished_run_that_wrote_nothing_leaves_nothing(tmp_path):
+    output = RunOutput(tmp_path / 'run', None, overwrite=False)
+    output.create()
+    assert output.keep_partial() == []
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_bag_outside_the_output_folder_is_a_second_staged_target(tmp_path):
+    out, bag = tmp_path / 'run', tmp_path / 'bags' / 'flight1'
+    bag.mkdir(parents=True)
+    (bag / 'metadata.yaml').write_text('old')
+    with pytest.raises(ParameterError, match='--bag: .* exists; pass --overwrite'):
+        RunOutput(out, bag, overwrite=False)
+    output = RunOutput(out, bag, overwrite=True)
+    output.create()
+    assert output.bag.name == 'flight1' and output.bag.parent.parent == bag.parent   # the bag keeps its name
+    output.bag.mkdir()
+    (output.bag / 'flight1_0.mcap').write_bytes(b'new')
+    (output.out / 'summary.json').write_text('new')
+    assert (bag / 'metadata.yaml').read_text() == 'old'
+    output.commit()
+    assert snapshot(bag) == {'flight1_0.mcap': b'new'} and snapshot(out) == {'summary.json': b'new'}
+    assert staging_folders(bag.parent) == [] and staging_folders(tmp_path) == []
+
+
+def test_overwrite_never_replaces_a_folder_that_is_not_a_bag(tmp_path):
+    home = tmp_path / 'home'
+    home.mkdir()
+    (home / 'thesis.tex').write_text('precious')
+    with pytest.raises(ParameterError, match='is not a bag'):
+        RunOutput(tmp_path / 'run', home, overwrite=True)
+    with pytest.raises(ParameterError, match='would hold the output folder'):
+        RunOutput(tmp_path / 'run', tmp_path, overwrite=True)
+
+
+@pytest.mark.parametrize('make_parent', ['file', 'sysfs'])
+def test_an_unwritable_place_is_refused_before_the_run(tmp_path, make_parent):
+    if make_parent == 'file':
+        (tmp_path / 'a_file').write_text('')
+        out = tmp_path / 'a_file' / 'x'
+        with pytest.raises(ParameterError, match='--out: .*a_file is not a directory'):
+            RunOutput(out, None, overwrite=False)
+        return
+    if not os.path.isdir('/sys/kernel'):
+        pytest.skip('no sysfs (not Linux): /sys/x is the case of the issue')
+    output = RunOutput('/sys/x', None, overwrite=False)   # root may pass the permission check; mkdir fails
+    with pytest.raises(ParameterError, match='--out: cannot write into /sys'):
+        output.create()
+
+
+
+def test_a_bag_of_another_name_in_the_output_folder_belongs_to_the_run(tmp_path):
+    out = tmp_path / 'run'
+    out.mkdir()
+    (out / 'flight7').mkdir()
+    (out / 'flight7' / 'metadata.yaml').write_text('old')
+    with pytest.raises(ParameterError, match=r'holds an earlier run \(flight7\)'):
+        RunOutput(out, out / 'flight7', overwrite=False)
+    output = RunOutput(out, out / 'flight7', overwrite=True)
+    output.create()
+    output.bag.mkdir()
+    (output.bag / 'flight7_0.mcap').write_bytes(b'new')
+    output.commit()
+    assert snapshot(out) == {'flight7/flight7_0.mcap': b'new'}
