@@ -136,8 +136,9 @@ def test_scenario_errors_and_duration_override():
         make_scenario('loop')
     with pytest.raises(ParameterError, match='duration'):
         make_scenario('paper', -1.0)
-    with pytest.raises(ParameterError, match='duration'):
+    with pytest.raises(ParameterError, match='fixed duration of 20 s'):
         make_scenario('waypoints', 10.0)
+    assert make_scenario('waypoints', 20.0) == Waypoints()    # its own length (last waypoint at 16 s, + 4 s hold)
 
 
 def test_a_shifted_scenario_moves_positions_and_start_only():

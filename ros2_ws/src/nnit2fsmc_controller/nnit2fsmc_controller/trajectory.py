@@ -186,17 +186,19 @@ SCENARIOS = {'paper': Helix, 'hover': Hover, 'steps': Steps, 'waypoints': Waypoi
 
 
 def make_scenario(name: str, duration: float | None = None, offset: Vec3 = (0.0, 0.0, 0.0)):
-    """The trajectory of a named scenario; ``duration`` [s] overrides the path length where it has one;
+    """The trajectory of a named scenario; ``duration`` [s] overrides the path length where it can (the
+    waypoints' is fixed: only their own length is accepted, as the ROS backend passes it to every scenario);
     a non-zero ``offset`` [m, world ENU] shifts the whole scenario (see :class:`Shifted`)."""
     if name not in SCENARIOS:
         raise ParameterError(f'scenario: {name!r} is not one of {", ".join(SCENARIOS)}')
     offset = tuple(check_number(f'offset[{i}]', v) for i, v in enumerate(offset))
     if len(offset) != 3:
         raise ParameterError(f'offset: expected 3 values (x, y, z [m]), got {len(offset)}')
-    if duration is None:
+    if duration is None or (name == 'waypoints' and duration == Waypoints().duration):   # the length it has
         trajectory = SCENARIOS[name]()
     elif name == 'waypoints':
-        raise ParameterError('duration: the waypoints scenario has a fixed duration (set by its last waypoint)')
+        raise ParameterError(f'duration: the waypoints scenario has a fixed duration of {Waypoints().duration:g} s '
+                             '(set by its last waypoint)')
     else:
         trajectory = SCENARIOS[name](duration=check_number('duration', duration, 0.0, low_inclusive=False))
     return Shifted(trajectory, offset) if any(offset) else trajectory
