@@ -1,11 +1,15 @@
 #!/usr/bin/env python3
-"""Lockstep rate of the ROS stack (three nodes, each its own process) next to a bare rclpy ping-pong.
+"""Lockstep rate of the ROS stack (every node its own process) next to a bare rclpy ping-pong, for fleets.
 
-Prints: the ping-pong round trips/s (the ceiling of a simulator-controller pair), then the lockstep
-paper flight's steps/s without and with the recorder, each as a share of that ceiling; then, for
-the recorded flight, its largest difference from the embedded flight of the same scenario in any
-odometry value and in each summary metric.
+Prints: the ping-pong round trips/s (the ceiling of one simulator-controller pair); then, for each
+fleet size of --vehicles (one simulator, a trajectory and a controller node per vehicle), the lockstep
+paper flight's steps/s without the recorder, without the recorder and without TF, and with the
+recorder, each as a share of that ceiling; for the recorded flight, each vehicle's odometry-to-force
+latency (median, p99, from the recorded publish times) and its largest difference from the embedded
+flight of that vehicle alone (same offset copy of the scenario) in any odometry value and in each
+summary metric.
 Needs a sourced ROS 2. Usage: python3 bench/bench_ros_lockstep.py [--duration S] [--controller NAME]
+[--vehicles N [N ...]]
 """
 from __future__ import annotations
 
@@ -24,10 +28,12 @@ from mcap.reader import make_reader  # noqa: E402
 
 import flight_stack  # noqa: E402,F401
 from flight_stack.embedded import fly_embedded  # noqa: E402
+from flight_stack.fleet import FleetVehicle, fleet_layout  # noqa: E402
 from flight_stack.ros_backend import RosFlightConfig, fly_ros  # noqa: E402
 from nnit2fsmc_controller.factory import load_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
 from quad_msgs_bridge.bag.reader import mcap_file  # noqa: E402
+from quad_msgs_bridge.bag.timing import message_timing  # noqa: E402
 from quad_msgs_bridge.contract import ODOM, RECORDED_TOPICS, resolve  # noqa: E402
 from quad_msgs_bridge.fast_cdr import decode_odometry  # noqa: E402
 from quad_msgs_bridge.bag.flight_bag import FlightBag  # noqa: E402
@@ -46,35 +52,37 @@ def steps_per_second(report: str) -> float:
     return float(match.group(1))
 
 
-def odometry_values(bag: Path) -> np.ndarray:
-    """Every recorded odometry as a row: stamp, position, orientation, linear and angular velocity."""
+def odometry_values(bag: Path, namespace: str) -> np.ndarray:
+    """Every recorded odometry of ``namespace`` as a row: stamp, position, orientation, linear and angular velocity."""
     with open(mcap_file(bag), 'rb') as stream:
         rows = [[sample.stamp, *sample.position, *sample.orientation, *sample.linear_velocity,
                  *sample.angular_velocity]
                 for sample in (decode_odometry(message.data) for _, _, message in
-                               make_reader(stream).iter_messages(topics=[resolve(ODOM, NAMESPACE)]))]
+                               make_reader(stream).iter_messages(topics=[resolve(ODOM, namespace)]))]
     return np.array(rows)
 
 
-def compare_with_embedded(ros_bag: Path, controller: str, trajectory, duration: float, scratch: Path) -> None:
-    """Print the largest differences between the ROS lockstep flight in ``ros_bag`` and the embedded one."""
+def compare_with_embedded(ros_bag: Path, vehicle: FleetVehicle, controller: str, duration: float,
+                          scratch: Path) -> None:
+    """Print the largest differences between ``vehicle``'s flight in ``ros_bag`` and the embedded flight of it alone."""
     params, disturbances = load_vehicle_file()
-    embedded_bag = scratch / 'embedded'
-    with FlightBag.create(embedded_bag, params, SETTLE_TIME, namespace=NAMESPACE) as bag:
-        fly_embedded(controller, trajectory, params, disturbances, load_gains(), duration, 1000.0, bag=bag)
-    ros, embedded = odometry_values(ros_bag), odometry_values(embedded_bag)
+    embedded_bag = scratch / f'embedded-{vehicle.namespace.replace("/", "-")}'
+    with FlightBag.create(embedded_bag, params, SETTLE_TIME, namespace=vehicle.namespace) as bag:
+        fly_embedded(controller, make_scenario('paper', duration, vehicle.offset), params, disturbances, load_gains(),
+                     duration, 1000.0, bag=bag)
+    ros, embedded = odometry_values(ros_bag, vehicle.namespace), odometry_values(embedded_bag, vehicle.namespace)
     if ros.shape != embedded.shape:
-        print(f'ROS flight has {len(ros)} odometry messages, the embedded one {len(embedded)}')
+        print(f'  {vehicle.namespace}: ROS flight has {len(ros)} odometry messages, the embedded one {len(embedded)}')
         return
-    print(f'ROS lockstep vs embedded: {len(ros)} odometry messages, largest difference in any value '
-          f'{np.abs(ros - embedded).max():.3g}')
-    metrics = [flight_metrics(read_flight(bag).record, SETTLE_TIME, params.F_min, params.F_max)
-               for bag in (ros_bag, embedded_bag)]
+    print(f'  {vehicle.namespace}: ROS lockstep vs embedded alone: {len(ros)} odometry messages, largest difference '
+          f'in any value {np.abs(ros - embedded).max():.3g}')
+    metrics = [flight_metrics(read_flight(bag, namespace=vehicle.namespace).record, SETTLE_TIME, params.F_min,
+                              params.F_max) for bag in (ros_bag, embedded_bag)]
     for key in ('rmse_position_m', 'max_position_error_m', 'rmse_yaw_rad', 'saturation_fraction'):
-        print(f'  {key:22s} ROS {metrics[0][key]:.12g}  embedded {metrics[1][key]:.12g}  '
+        print(f'    {key:22s} ROS {metrics[0][key]:.12g}  embedded {metrics[1][key]:.12g}  '
               f'difference {abs(metrics[0][key] - metrics[1][key]):.3g}')
     for name, value in metrics[1]['chattering'].items():
-        print(f'  chattering {name:11s} ROS {metrics[0]["chattering"][name]:.12g}  embedded {value:.12g}  '
+        print(f'    chattering {name:11s} ROS {metrics[0]["chattering"][name]:.12g}  embedded {value:.12g}  '
               f'difference {abs(metrics[0]["chattering"][name] - value):.3g}')
 
 
@@ -82,27 +90,34 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--duration', type=float, default=10.0)
     parser.add_argument('--controller', default='nnit2fsmc')
+    parser.add_argument('--vehicles', type=int, nargs='+', default=[1], metavar='N', help='fleet sizes to fly')
     args = parser.parse_args()
     pingpong = subprocess.run([sys.executable, str(ROOT / 'bench' / 'bench_ros_pingpong.py')],
                               capture_output=True, text=True, check=True).stdout
     ceiling = float(re.search(r'([0-9.]+) round trips/s', pingpong).group(1))
     print(pingpong.rstrip())
-    trajectory = make_scenario('paper', args.duration)
-    for record in (False, True):
-        with tempfile.TemporaryDirectory() as tmp:
-            result = fly_ros(RosFlightConfig(
-                namespace=NAMESPACE, controller=args.controller, scenario='paper', duration=args.duration,
-                disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0,
-                initial_state=trajectory.initial_state, bag=Path(tmp) / 'bag',
-                topics=[t.name for t in RECORDED_TOPICS], settle_time=SETTLE_TIME, quiet=True, record=record))
-            if result.failed_node:
-                raise RuntimeError(f'flight failed: {result}')
-            rate = steps_per_second(result.sim_report)
-            label = 'with recorder' if record else 'three nodes'
-            print(f'lockstep {args.controller}, {label:13s}: {rate:7.0f} steps/s = '
-                  f'{100 * rate / ceiling:5.1f} % of the ping-pong ceiling')
-            if record:
-                compare_with_embedded(Path(tmp) / 'bag', args.controller, trajectory, args.duration, Path(tmp))
+    for count in args.vehicles:
+        vehicles = fleet_layout(count, NAMESPACE)
+        for label, record, tf in (('no recorder', False, True), ('no recorder, no TF', False, False),
+                                  ('with recorder', True, True)):
+            with tempfile.TemporaryDirectory() as tmp:
+                result = fly_ros(RosFlightConfig(
+                    vehicles=vehicles, controller=args.controller, scenario='paper', duration=args.duration,
+                    disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0, bag=Path(tmp) / 'bag',
+                    topics=[t.name for t in RECORDED_TOPICS], settle_time=SETTLE_TIME, quiet=True, record=record,
+                    publish_tf=tf))
+                if result.failed_node:
+                    raise RuntimeError(f'flight failed: {result}')
+                rate = steps_per_second(result.sim_report)
+                print(f'lockstep {args.controller}, {count} vehicle(s), {label:18s}: {rate:7.0f} steps/s = '
+                      f'{100 * rate / ceiling:5.1f} % of the ping-pong ceiling')
+                if record:
+                    for vehicle in vehicles:
+                        timing = message_timing(Path(tmp) / 'bag', vehicle.namespace)
+                        print(f'  {vehicle.namespace}: odom->forces latency median {timing["latency_median_ms"]:.3f} '
+                              f'ms, p99 {timing["latency_p99_ms"]:.3f} ms')
+                    for vehicle in vehicles:
+                        compare_with_embedded(Path(tmp) / 'bag', vehicle, args.controller, args.duration, Path(tmp))
 
 
 if __name__ == '__main__':

@@ -14,6 +14,7 @@ complete run: its summary, bag and report are kept in OUT.
 Examples:
   python3 run_stack.py                                   # the paper's flight, NNIT2FSMC
   python3 run_stack.py --controller smc-sign --no-disturbances --out out/sign
+  python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
 Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
   python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
@@ -40,7 +41,7 @@ DEPENDENCIES = {'numpy': 'numpy', 'yaml': 'PyYAML', 'rosbags': 'rosbags', 'mcap'
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     from nnit2fsmc_controller.factory import CONTROLLERS
     from nnit2fsmc_controller.trajectory import SCENARIOS
-    from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS
+    from quad_msgs_bridge.contract import RECORDED_TOPICS
 
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -65,7 +66,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--max-error', type=float, default=1.0,
                         help='the flight fails if the position error after settling exceeds this [m] (> 0)')
     parser.add_argument('--quiet', action='store_true', help='no progress lines')
-    parser.add_argument('--namespace', default=DEFAULT_NAMESPACE, help='ROS backend: namespace of the vehicle')
+    parser.add_argument('--namespace', default=None,
+                        help='ROS backend: namespace of the vehicle (default quad), or of a fleet\'s vehicles '
+                             '(default: the root namespace)')
+    parser.add_argument('--vehicles', type=int, default=1, metavar='N',
+                        help='ROS backend: fly N vehicles on one sim clock, uav1..uavN, each its own copy of the '
+                             'scenario shifted 3 m along y from the previous one')
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                         help='ROS backend: lockstep (deterministic) or realtime simulation')
     parser.add_argument('--speed-factor', type=float, default=None,
@@ -220,16 +226,19 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
     return Flown(result.record, result.wall_time_s, flight, failure=result.failure)
 
 
-def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> Flown:
-    """Every node in its own process; the flight is read from the bag the recorder node wrote."""
+def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str, Flown]]:
+    """Every node in its own process; per vehicle (its namespace, its flight) read from the bag the recorder
+    node wrote: one, or a fleet (flight_stack.fleet)."""
+    from flight_stack.fleet import fleet_layout
     from flight_stack.ros_backend import RosFlightConfig, fly_ros
     from quad_msgs_bridge.bag.timing import message_timing
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
+    vehicles = fleet_layout(args.vehicles, args.namespace)
     result = fly_ros(RosFlightConfig(
-        namespace=args.namespace, controller=plan.controller, scenario=plan.scenario, duration=plan.duration,
+        vehicles=vehicles, controller=plan.controller, scenario=plan.scenario, duration=plan.duration,
         disturbances=plan.disturbances.enabled, seed=plan.seed, physics_rate=plan.physics_rate,
-        control_rate=plan.control_rate, initial_state=plan.trajectory.initial_state, bag=bag,
+        control_rate=plan.control_rate, bag=bag,
         topics=[t.name for t in plan.topics], mode=args.mode, speed_factor=args.speed_factor,
         extra_odom_subscribers=args.extra_subscribers, vehicle_file=args.vehicle, gains_file=args.gains,
         settle_time=plan.settle_time, quiet=args.quiet))
@@ -237,15 +246,22 @@ def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> Flown:
         raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
                             + (f'; the bag is closed: {bag}' if bag_shown else ''),
                             130 if result.failed_node == 'interrupted' else 1)
-    try:
-        flight = read_flight(bag, namespace=args.namespace, vehicle_file=args.vehicle, settle_time=plan.settle_time)
-        timing = message_timing(bag, args.namespace)
-    except ValueError as error:
-        raise FlightStopped(f'cannot summarise the flight from {bag}: {error}', 1) from error
-    flight.path = bag_shown
-    extra = {'ros': {'namespace': args.namespace, 'mode': args.mode,
-                     'simulator': result.sim_report.split('] ')[-1], 'timing': timing}}
-    return Flown(flight.record, result.wall_time_s, flight if bag_shown else None, extra)
+    flights = []
+    for vehicle in vehicles:
+        try:
+            flight = read_flight(bag, namespace=vehicle.namespace, vehicle_file=args.vehicle,
+                                 settle_time=plan.settle_time)
+            timing = message_timing(bag, vehicle.namespace)
+        except ValueError as error:
+            raise FlightStopped(f'cannot summarise the flight of {vehicle.namespace} from {bag}: {error}', 1) \
+                from error
+        flight.path = bag_shown
+        extra = {'ros': {'namespace': vehicle.namespace, 'mode': args.mode,
+                         'simulator': result.sim_report.split('] ')[-1], 'timing': timing},
+                 **({'offset_m': list(vehicle.offset)} if len(vehicles) > 1 else {})}
+        flights.append((vehicle.namespace, Flown(flight.record, result.wall_time_s, flight if bag_shown else None,
+                                                 extra)))
+    return flights
 
 
 def print_ros_lines(summary: dict) -> None:
@@ -299,6 +315,7 @@ def run(argv: list[str]) -> int:
         from flight_stack.campaign.cli import main as campaign_main
         return campaign_main(argv[1:])
     args = parse_args(argv)
+    from flight_stack.fleet import MAX_VEHICLES
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
     from quad_msgs_bridge.vehicle_params import ParameterError, check_number
@@ -308,7 +325,10 @@ def run(argv: list[str]) -> int:
                            physics_rate=args.physics_rate, settle_time=args.settle_time, max_error=args.max_error,
                            topics=args.topics)
         check_number('--extra-subscribers', args.extra_subscribers, 0.0, 100.0)
+        check_number('--vehicles', args.vehicles, 1, MAX_VEHICLES)
         backend = choose_backend(args.backend, args.live)
+        if backend == 'embedded' and args.vehicles > 1:
+            raise ParameterError('--vehicles: a fleet flies on the ROS backend (--backend ros)')
         speed_factor = check_live_options(args, backend)
         if backend == 'ros':
             args.speed_factor = check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor,
@@ -328,7 +348,8 @@ def run(argv: list[str]) -> int:
         print(f'error: {error}', file=sys.stderr)
         return 2
     print(f'flying {plan.controller} on "{plan.scenario}" for {plan.duration:g} s '
-          f'(disturbances {"on" if plan.disturbances.enabled else "off"}), {backend} backend')
+          f'(disturbances {"on" if plan.disturbances.enabled else "off"}), {backend} backend'
+          + (f', {args.vehicles} vehicles' if args.vehicles > 1 else ''))
     try:
         return fly_and_report(args, plan, backend, output, bag_shown, live_server, speed_factor)
     except BaseException:
@@ -389,15 +410,19 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
     try:
         if backend == 'ros':
             with tempfile.TemporaryDirectory(prefix='nnit2fsmc-') as scratch:   # --no-bag: the bag is read, then goes
-                flown = fly_on_ros(args, plan, output.bag or Path(scratch) / 'bag', bag_shown)
+                flights = fly_on_ros(args, plan, output.bag or Path(scratch) / 'bag', bag_shown)
         else:
-            flown = fly_here(plan, output.bag, bag_shown, not args.quiet, live_server, speed_factor, args.live_wait)
+            flights = [(None, fly_here(plan, output.bag, bag_shown, not args.quiet, live_server, speed_factor,
+                                       args.live_wait))]
     except KeyboardInterrupt:
         return unfinished(output, 'interrupted' + (f'; bag closed: {output.bag}' if output.bag else ''), 130)
     except FlightStopped as stopped:
         return unfinished(output, f'error: {stopped}', stopped.code)
     except BagWriteError as error:
         return unfinished(output, f'error: {error}', 1)
+    if len(flights) > 1:
+        return report_fleet(flights, plan, output, bag_shown)
+    [(_, flown)] = flights
     summary = summarize(flown, plan, backend)
     write_summary(summary, output.out)
     review_lines, report = review_now(flown, plan, output.out) if flown.flight is not None else ([], None)
@@ -412,3 +437,19 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
     if report:
         print(f'report: {output.out_dir / report}')
     return 0 if summary['flight_ok'] else 1
+
+
+def report_fleet(flights: list[tuple[str, Flown]], plan, output, bag_shown: Path | None) -> int:
+    """A fleet's summary (one row per vehicle, summary.json ``vehicles.<name>``), moved into place; the exit status."""
+    from flight_stack.fleet import fleet_summary, format_fleet_summary
+    from flight_stack.summary import write_summary
+
+    fleet = fleet_summary({name: summarize(flown, plan, 'ros') for name, flown in flights})
+    write_summary(fleet, output.out)
+    output.commit()
+    print(format_fleet_summary(fleet))
+    print(f'summary: {output.out_dir / "summary.json"}')
+    if bag_shown:
+        print(f'bag: {bag_shown} (every vehicle; review one: run_stack.py review {bag_shown} --namespace '
+              f'{flights[0][0]})')
+    return 0 if fleet['flight_ok'] else 1

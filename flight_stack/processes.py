@@ -68,20 +68,30 @@ class NodeProcess:
 
     def stop(self, grace: float = 5.0) -> int:
         """SIGINT, then SIGTERM and SIGKILL if it does not exit within ``grace`` seconds each."""
-        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
-            if self.process.poll() is not None:
-                break
+        return stop_all([self], grace)[self.name]
+
+
+def stop_all(processes: Sequence[NodeProcess], grace: float = 5.0) -> dict[str, int]:
+    """Stop processes together: SIGINT to all, then SIGTERM and SIGKILL to those still running ``grace``
+    seconds after each; {name: exit code}. (One by one, the last nodes of a fleet waited seconds without
+    odometry and warned about it.)"""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGKILL):
+        running = [proc for proc in processes if proc.process.poll() is None]
+        for proc in running:
             try:
-                self.process.send_signal(sig)
+                proc.process.send_signal(sig)
             except ProcessLookupError:
-                break
+                pass
+        deadline = time.monotonic() + grace
+        for proc in running:
             try:
-                self.process.wait(timeout=grace)
+                proc.process.wait(timeout=max(0.0, deadline - time.monotonic()))
             except subprocess.TimeoutExpired:
-                print(f'[{self.name}] did not stop after {sig.name}', flush=True)
-        code = self.process.wait()
-        self._reader.join(timeout=2.0)
-        return code
+                print(f'[{proc.name}] did not stop after {sig.name}', flush=True)
+    codes = {proc.name: proc.process.wait() for proc in processes}
+    for proc in processes:
+        proc._reader.join(timeout=2.0)
+    return codes
 
 
 def wait_for_exit(processes: Sequence[NodeProcess], until: NodeProcess, timeout: float,

@@ -1,12 +1,16 @@
 """ROS backend: each node in its own process, in a namespace, like ``ros2 launch`` would start them.
 
-Order: the recorder first (it records what really goes over the topics), then the trajectory, the
-controller and the simulator. In lockstep the simulator waits for two ``odom`` subscribers (the
-controller and the recorder) and the recorder only subscribes to ``odom`` once it has discovered
-the controller's publishers, so the bag holds every step. The flight ends when the simulator has
-reached the duration and exits; the others are then stopped with SIGINT (then SIGTERM, SIGKILL),
-the recorder last so that it drains what is still in flight and finalizes the bag. If any node dies
-first, the rest are stopped the same way and the flight is reported as failed.
+One vehicle or a fleet on one sim clock (see :mod:`.fleet`): one recorder and one simulator for all
+(a lone vehicle's in its namespace, a fleet's in the vehicles' parent namespace), and per vehicle a
+trajectory node (its offset copy of the scenario) and a controller node in the vehicle's namespace.
+Order: the recorder first (it records what really goes over the topics), then each vehicle's
+trajectory and controller, then the simulator. In lockstep the simulator waits for two subscribers
+of each vehicle's ``odom`` (its controller and the recorder) and the recorder only subscribes to
+``odom`` once it has discovered every controller's publishers, so the bag holds every step. The
+flight ends when the simulator has reached the duration and exits; the others are then stopped
+together with SIGINT (then SIGTERM, SIGKILL), the recorder last so that it drains what is still in
+flight and finalizes the bag. If any node dies first (named with its vehicle in a fleet:
+``controller uav2``), the rest are stopped the same way and the flight is reported as failed.
 
 The summary is computed from the bag: what was observed on the topics.
 """
@@ -15,12 +19,15 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import yaml
 
+from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.flight_bag import disturbances_label
 
-from .processes import NodeProcess, node_command, source_tree_environment, wait_for_exit
+from .fleet import FleetVehicle, fleet_home
+from .processes import NodeProcess, node_command, source_tree_environment, stop_all, wait_for_exit
 
 
 EXTRA_SUBSCRIBER_DELAY = 1.0   #: [s, wall] the simulator waits once extra odom subscribers are there
@@ -28,7 +35,7 @@ EXTRA_SUBSCRIBER_DELAY = 1.0   #: [s, wall] the simulator waits once extra odom 
 
 @dataclass
 class RosFlightConfig:
-    namespace: str
+    vehicles: Sequence[FleetVehicle]   #: one, or a fleet (each starts at rest under its shifted scenario)
     controller: str
     scenario: str
     duration: float
@@ -36,7 +43,6 @@ class RosFlightConfig:
     seed: int
     physics_rate: float
     control_rate: float
-    initial_state: list[float]
     bag: Path
     topics: list[str]
     mode: str = 'lockstep'
@@ -48,6 +54,7 @@ class RosFlightConfig:
     quiet: bool = False
     extra_odom_subscribers: int = 0   #: further odom subscribers the simulator waits for (e.g. a ros2 bag record)
     record: bool = True       #: False: no recorder process (for timing the bare three-node loop)
+    publish_tf: bool = True   #: the simulator broadcasts every vehicle's odom -> <ns>/base_link on /tf
 
 
 @dataclass
@@ -75,43 +82,50 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     """Fly with every node in its own process; the bag at ``config.bag`` holds what went over the topics."""
     env = source_tree_environment()
     vehicle = {'vehicle_file': str(config.vehicle_file)} if config.vehicle_file else {}
-    nodes = [
-        ('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.bag.recorder_node',
-         {'bag': str(config.bag), 'overwrite': True, 'topics': config.topics, 'controller': config.controller,
-          'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time,
-          'disturbances': disturbances_label(config.disturbances), **vehicle}),
-        ('trajectory', 'nnit2fsmc_controller', 'trajectory', 'nnit2fsmc_controller.trajectory_node',
-         # the path start is given in sim time and the node reads no clock after it: no use_sim_time, so it
-         # does not wake for every /clock message (that cost a third of the lockstep rate here)
-         {'use_sim_time': False, 'scenario': config.scenario, 'duration': config.duration,
-          'setpoint_rate': config.setpoint_rate, 'start_time': 0.0}),
-        ('controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller.controller_node',
-         # it stamps with the odometry's stamp and reads no clock (its odometry watchdog runs on the steady
-         # clock): no use_sim_time either, which spares a /clock callback per step (11 % of the lockstep rate)
-         {'use_sim_time': False, 'controller': config.controller, 'nnit2fsmc.seed': config.seed,
-          'latest_only': config.mode == 'realtime', **vehicle,
-          **({'gains_file': str(config.gains_file)} if config.gains_file else {})}),
-        ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node',
+    home, names = fleet_home(config.vehicles)
+    fleet = {'vehicles': names} if len(names) > 1 else {}   # one vehicle: the default, the node's namespace
+    initial_states = [value for v in config.vehicles
+                      for value in make_scenario(config.scenario, offset=v.offset).initial_state]
+    nodes = [('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.bag.recorder_node', home,
+              {'bag': str(config.bag), 'overwrite': True, 'topics': config.topics, 'controller': config.controller,
+               'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time,
+               'disturbances': disturbances_label(config.disturbances), **fleet, **vehicle})] if config.record else []
+    for v in config.vehicles:
+        label = f' {v.namespace}' if fleet else ''
+        nodes += [
+            (f'trajectory{label}', 'nnit2fsmc_controller', 'trajectory', 'nnit2fsmc_controller.trajectory_node',
+             v.namespace,
+             # the path start is given in sim time and the node reads no clock after it: no use_sim_time, so it
+             # does not wake for every /clock message (that cost a third of the lockstep rate here)
+             {'use_sim_time': False, 'scenario': config.scenario, 'duration': config.duration,
+              'setpoint_rate': config.setpoint_rate, 'start_time': 0.0, 'offset': list(v.offset)}),
+            (f'controller{label}', 'nnit2fsmc_controller', 'nnit2fsmc_controller',
+             'nnit2fsmc_controller.controller_node', v.namespace,
+             # it stamps with the odometry's stamp and reads no clock (its odometry watchdog runs on the steady
+             # clock): no use_sim_time either, which spares a /clock callback per step (11 % of the lockstep rate)
+             {'use_sim_time': False, 'controller': config.controller, 'nnit2fsmc.seed': config.seed,
+              'latest_only': config.mode == 'realtime', **vehicle,
+              **({'gains_file': str(config.gains_file)} if config.gains_file else {})})]
+    nodes.append(
+        ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node', home,
          {'duration': config.duration, 'exit_at_end': True, 'disturbances': config.disturbances,
           'physics_rate': config.physics_rate, 'odometry_rate': config.control_rate, 'mode': config.mode,
           'speed_factor': config.speed_factor,
           'wait_for_subscribers': (2 if config.record else 1) + config.extra_odom_subscribers,
           # an outside recorder subscribes to odom among its other topics: give those time to match too
           'start_delay': EXTRA_SUBSCRIBER_DELAY if config.extra_odom_subscribers else 0.0,
-          'initial_state': config.initial_state, **vehicle}),
-    ]
-    if not config.record:
-        nodes = nodes[1:]
+          'initial_state': initial_states, 'publish_tf': config.publish_tf, **fleet, **vehicle}))
     processes: list[NodeProcess] = []
     started = time.monotonic()
     failed = None
     try:
-        for name, package, executable, module, params in nodes:
-            command = node_command(package, executable, module) + _ros_args(config.namespace, params)
+        for name, package, executable, module, namespace, params in nodes:
+            command = node_command(package, executable, module) + _ros_args(namespace, params)
             processes.append(NodeProcess(name, command, env, quiet=config.quiet))
         sim = processes[-1]
-        # generous: start-up, discovery, and the flight at no less than a tenth of real time
-        timeout = 60.0 + 10.0 * config.duration / (config.speed_factor if config.mode == 'realtime' else 1.0)
+        # generous: start-up, discovery, and the flight at no less than a tenth of real time per vehicle
+        timeout = 60.0 + 10.0 * len(config.vehicles) * config.duration / (
+            config.speed_factor if config.mode == 'realtime' else 1.0)
         dead = wait_for_exit(processes, until=sim, timeout=timeout)
         if dead is not None:
             failed = dead.name
@@ -120,9 +134,7 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     except (KeyboardInterrupt, TimeoutError) as stop:
         failed = 'interrupted' if isinstance(stop, KeyboardInterrupt) else f'timeout ({stop})'
     finally:
-        codes = {}
-        for proc in reversed(processes[1:]):
-            codes[proc.name] = proc.stop()
+        codes = stop_all(processes[1:])
         if processes:
             codes[processes[0].name] = processes[0].stop(grace=30.0)
     wall = time.monotonic() - started

@@ -7,7 +7,7 @@ import pytest
 from quad_msgs_bridge import fast_cdr
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.conversions import (clock_msg, diagnostics_msg, odometry_msg, pose_stamped_msg, rosbags_kit,
-                                          rotor_forces_msg, wrench_msg)
+                                          rotor_forces_msg, tf_msg, wrench_msg)
 from quad_msgs_bridge.frames import quaternion_from_euler
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.timebase import stamp_fields
@@ -92,8 +92,34 @@ def test_clock(t):
     assert fast_cdr.clock_encoder()(*stamp_fields(t)) == serialized(clock_msg(KIT, t), 'rosgraph_msgs/msg/Clock')
 
 
-def test_a_layout_refuses_constants_after_float_fields():
-    layout = fast_cdr.CdrLayout(stamped=True)
-    layout.float64(3)
-    with pytest.raises(ValueError, match='precede'):
-        layout.string('late')
+def random_samples(seed: int, t: float, count: int) -> list[OdometrySample]:
+    samples = []
+    for k in range(count):
+        v = random_values(100 * seed + k, 12)
+        samples.append(OdometrySample(t, tuple(v[0:3]), quaternion_from_euler(*v[3:6]), tuple(v[6:9]),
+                                      tuple(v[9:12])))
+    return samples
+
+
+@pytest.mark.parametrize('children', [['quad/base_link'], ['uav1/base_link', 'uav2/base_link', 'uav10/base_link'],
+                                      ['a', 'bb', 'ccc', 'dddd', 'e' * 13], []])
+@pytest.mark.parametrize('seed', range(2))
+@pytest.mark.parametrize('t', STAMPS)
+def test_tf(children, seed, t):
+    """One TFMessage per step, one transform per vehicle: the frame ids' lengths move every later alignment."""
+    samples = random_samples(seed, t, len(children))
+    sec, nanosec = stamp_fields(t)
+    assert (fast_cdr.tf_encoder(children)(sec, nanosec, samples)
+            == serialized(tf_msg(KIT, t, samples, children), 'tf2_msgs/msg/TFMessage'))
+
+
+def test_tf_with_another_parent_frame():
+    samples = random_samples(3, 1.5, 2)
+    children = ['fleet/uav1/base_link', 'fleet/uav2/base_link']
+    assert (fast_cdr.tf_encoder(children, 'map')(1, 500000000, samples)
+            == serialized(tf_msg(KIT, 1.5, samples, children, 'map'), 'tf2_msgs/msg/TFMessage'))
+
+
+def test_tf_refuses_a_pose_count_other_than_the_frame_count():
+    with pytest.raises(ValueError, match='2 poses for 3 child frames'):
+        fast_cdr.tf_encoder(['a', 'b', 'c'])(0, 0, random_samples(0, 0.0, 2))

@@ -78,7 +78,8 @@ def test_values_read_back_by_rosbags_equal_what_was_published(flight):
         for connection, _, raw in reader.messages():
             decoded.setdefault(connection.topic, []).append((reader.deserialize(raw, connection.msgtype), raw))
     [path] = flight.published.paths
-    assert decoded[name(SETPOINTS)][0][1] == TYPESTORE.serialize_cdr(setpoints_msg(kit, path), SETPOINTS.type)
+    assert decoded[name(SETPOINTS)][0][1] == TYPESTORE.serialize_cdr(
+        setpoints_msg(kit, path, child_frame_id='quad/base_link'), SETPOINTS.type)
     assert decoded[name(REFERENCE_PATH)][0][1] == TYPESTORE.serialize_cdr(path_msg(kit, path), REFERENCE_PATH.type)
     for k, (odometry, forces, controls, position, yaw, surfaces, equivalent, corrective) in \
             enumerate(flight.published.steps):
@@ -86,6 +87,7 @@ def test_values_read_back_by_rosbags_equal_what_was_published(flight):
         clock = decoded[name(CLOCK)][k][0].clock
         assert (clock.sec, clock.nanosec) == stamp_fields(odometry.stamp)
         assert rotor_forces_from_msg(decoded[name(ROTOR_FORCES)][k][0]) == tuple(forces)
+        assert decoded[name(CONTROL_WRENCH)][k][0].header.frame_id == 'quad/base_link'
         wrench = decoded[name(CONTROL_WRENCH)][k][0].wrench
         u1, u2, u3, u4 = controls
         assert (wrench.force.x, wrench.force.y, wrench.force.z) == (0.0, 0.0, u1)
@@ -95,6 +97,47 @@ def test_values_read_back_by_rosbags_equal_what_was_published(flight):
         assert ((pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w)
                 == quaternion_from_euler(0.0, 0.0, yaw))
         assert diagnostics_from_msg(decoded[name(CONTROL_DIAGNOSTICS)][k][0]) == (surfaces, equivalent, corrective)
+
+
+def test_tf_carries_odom_to_the_namespaced_base_link_at_every_odometry_stamp(flight):
+    """One /tf message per step, stamped as the odometry of that step, logged at it, transform = odometry pose."""
+    transforms, odometry = [], []
+    with AnyReader([flight.bag]) as reader:
+        for connection, timestamp, raw in reader.messages():
+            if connection.topic == '/tf':
+                assert connection.msgtype == 'tf2_msgs/msg/TFMessage'
+                transforms.append((timestamp, reader.deserialize(raw, connection.msgtype).transforms))
+            elif connection.topic == name(ODOM):
+                odometry.append(reader.deserialize(raw, connection.msgtype))
+    assert len(transforms) == len(odometry) == flight.result.steps
+    for (log_time, [tf]), odom in zip(transforms, odometry):
+        assert (tf.header.frame_id, tf.child_frame_id) == ('odom', 'quad/base_link')
+        assert (tf.header.frame_id, tf.child_frame_id) == (odom.header.frame_id, odom.child_frame_id)
+        assert (tf.header.stamp.sec, tf.header.stamp.nanosec) == (odom.header.stamp.sec, odom.header.stamp.nanosec)
+        assert log_time == odom.header.stamp.sec * 1_000_000_000 + odom.header.stamp.nanosec
+        t, r = tf.transform.translation, tf.transform.rotation
+        p, q = odom.pose.pose.position, odom.pose.pose.orientation
+        assert (t.x, t.y, t.z, r.x, r.y, r.z, r.w) == (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+    assert transforms[-1][1][0].transform.translation.z > 0.0   # the pose moves: not a constant transform
+
+
+def test_the_body_frame_of_a_nested_namespace_is_the_namespace_path(tmp_path):
+    """Frame ids of the vehicle in namespace /fleet/uav2: every body-frame field says fleet/uav2/base_link."""
+    recorded = fly_recorded(tmp_path / 'bag', duration=1.1, namespace='/fleet/uav2/')
+    frames = {}
+    with AnyReader([recorded.bag]) as reader:
+        for connection, _, raw in reader.messages():
+            msg = reader.deserialize(raw, connection.msgtype)
+            if connection.topic == '/tf':
+                frames['tf'] = (msg.transforms[0].header.frame_id, msg.transforms[0].child_frame_id)
+            elif connection.topic == '/fleet/uav2/odom':
+                frames['odom'] = (msg.header.frame_id, msg.child_frame_id)
+            elif connection.topic == '/fleet/uav2/control/wrench':
+                frames['wrench'] = msg.header.frame_id
+            elif connection.topic == '/fleet/uav2/setpoints':
+                frames['setpoints'] = (msg.header.frame_id, list(msg.joint_names))
+    assert frames == {'tf': ('odom', 'fleet/uav2/base_link'), 'odom': ('odom', 'fleet/uav2/base_link'),
+                      'wrench': 'fleet/uav2/base_link', 'setpoints': ('odom', ['fleet/uav2/base_link'])}
 
 
 def test_mcap_reader_sees_the_ros2_profile_schemas_channels_and_values(flight):
@@ -127,7 +170,7 @@ def test_mcap_reader_sees_the_ros2_profile_schemas_channels_and_values(flight):
         sample = values[0]
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
         assert (p.x, p.y, p.z, q.x, q.y, q.z, q.w) == (*sample.position, *sample.orientation)
-        assert msg.header.frame_id == 'odom' and msg.child_frame_id == 'base_link'
+        assert msg.header.frame_id == 'odom' and msg.child_frame_id == 'quad/base_link'
         assert (msg.twist.twist.angular.x, msg.twist.twist.angular.y, msg.twist.twist.angular.z) == \
             sample.angular_velocity
 

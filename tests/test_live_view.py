@@ -35,7 +35,8 @@ CONTRACT = {'/quad/odom': 'nav_msgs/msg/Odometry', '/quad/rotor_forces': 'std_ms
             '/quad/setpoints': 'trajectory_msgs/msg/MultiDOFJointTrajectory',
             '/quad/reference_path': 'nav_msgs/msg/Path', '/quad/control/wrench': 'geometry_msgs/msg/WrenchStamped',
             '/quad/control/reference': 'geometry_msgs/msg/PoseStamped',
-            '/quad/control/diagnostics': 'std_msgs/msg/Float64MultiArray', '/clock': 'rosgraph_msgs/msg/Clock'}
+            '/quad/control/diagnostics': 'std_msgs/msg/Float64MultiArray', '/clock': 'rosgraph_msgs/msg/Clock',
+            '/tf': 'tf2_msgs/msg/TFMessage'}
 SCENE_TOPIC = '/quad/scene'
 TIMEOUT = 30.0
 
@@ -130,7 +131,7 @@ def test_the_client_decodes_the_odometry_with_the_jazzy_typestore(live_flight):
     stamps = []
     for log_time, payload in live_flight['seen']['odometry']:
         odometry = typestore.deserialize_cdr(payload, 'nav_msgs/msg/Odometry')
-        assert (odometry.header.frame_id, odometry.child_frame_id) == ('odom', 'base_link')
+        assert (odometry.header.frame_id, odometry.child_frame_id) == ('odom', 'quad/base_link')
         stamp = odometry.header.stamp
         assert stamp.sec * 1_000_000_000 + stamp.nanosec == log_time       # log time = sim time, as in the bag
         position, q = odometry.pose.pose.position, odometry.pose.pose.orientation
@@ -163,7 +164,7 @@ def messages(bag: Path) -> list[tuple[str, int, int, bytes]]:
 def test_the_bag_of_a_live_flight_equals_the_bag_without_live(live_flight):
     assert live_flight['plain_status'] == 0
     live, plain = messages(live_flight['bag']), messages(live_flight['plain_bag'])
-    assert len(live) == len(plain) == 6 * STEPS + 2    # 6 topics per step; setpoints and reference_path once
+    assert len(live) == len(plain) == 7 * STEPS + 2    # 7 topics per step; setpoints and reference_path once
     assert live == plain
     counts = [{t['topic_metadata']['name']: t['message_count'] for t in read_metadata(bag)['topics_with_message_count']}
               for bag in (live_flight['bag'], live_flight['plain_bag'])]

@@ -6,6 +6,8 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,8 +24,10 @@ if HAVE_RCLPY:
     from quad_msgs_bridge.ros_helpers import qos_profile
 
 from quad_msgs_bridge.bag.reader import mcap_file
+from flight_stack.fleet import FleetVehicle, fleet_layout
+from flight_stack.processes import stop_all
 from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
-                                       REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, resolve)
+                                       REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, TF, resolve)
 from quad_msgs_bridge.conversions import odometry_from_msg, odometry_msg, pose_stamped_msg, rclpy_kit, rotor_forces_msg
 from quad_msgs_bridge.state import odometry_from_state, state_from_odometry
 from nnit2fsmc_controller.trajectory import Hover, make_scenario
@@ -38,15 +42,12 @@ def ros_node():
     rclpy.shutdown()
 
 
-def stop_all(processes):
-    return {p.name: p.stop() for p in reversed(processes)}
-
-
 def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
     namespace = 'contract_check'
     kit = rclpy_kit()
     received = {}
-    for topic in (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, SETPOINTS, REFERENCE_PATH):
+    for topic in (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, SETPOINTS, REFERENCE_PATH,
+                  TF):
         ros_node.create_subscription(kit[topic.type], resolve(topic, namespace),
                                      lambda msg, name=topic.name: received.setdefault(name, msg), qos_profile(topic.qos))
     initial = Hover().initial_state
@@ -58,7 +59,7 @@ def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
                      {'duration': 2.0, 'initial_state': initial, 'wait_for_subscribers': 2}),
     ]
     try:
-        assert spin_until(ros_node, lambda: len(received) == 7, timeout=30.0), f'only got {sorted(received)}'
+        assert spin_until(ros_node, lambda: len(received) == 8, timeout=30.0), f'only got {sorted(received)}'
         types = dict(ros_node.get_topic_names_and_types())
     finally:
         codes = stop_all(processes)
@@ -67,9 +68,12 @@ def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
                   REFERENCE_PATH, GOAL_POSE):
         assert types[resolve(topic, namespace)] == [topic.type]
     assert types['/clock'] == ['rosgraph_msgs/msg/Clock']
+    assert types['/tf'] == ['tf2_msgs/msg/TFMessage']
     odom = received['odom']
-    assert (odom.header.frame_id, odom.child_frame_id) == ('odom', 'base_link')
-    assert received['control/wrench'].header.frame_id == 'base_link'
+    assert (odom.header.frame_id, odom.child_frame_id) == ('odom', 'contract_check/base_link')
+    [transform] = received['/tf'].transforms
+    assert (transform.header.frame_id, transform.child_frame_id) == ('odom', 'contract_check/base_link')
+    assert received['control/wrench'].header.frame_id == 'contract_check/base_link'
     assert received['rotor_forces'].layout.dim[0].size == 4
     assert received['reference_path'].header.frame_id == 'odom'
     assert len(received['setpoints'].points) > 1
@@ -104,8 +108,8 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
     duration, settle = 7.0, 5.0
     trajectory = make_scenario('paper', duration)
     result = fly_ros(RosFlightConfig(
-        namespace='equal', controller='nnit2fsmc', scenario='paper', duration=duration, disturbances=True, seed=0,
-        physics_rate=1000.0, control_rate=1000.0, initial_state=trajectory.initial_state, bag=tmp_path / 'ros',
+        vehicles=[FleetVehicle('equal')], controller='nnit2fsmc', scenario='paper', duration=duration,
+        disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0, bag=tmp_path / 'ros',
         topics=[t.name for t in RECORDED_TOPICS], settle_time=settle, quiet=True))
     assert result.failed_node is None, result
     params, disturbances = load_vehicle_file()
@@ -134,44 +138,247 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
         assert ros_payloads[topic] == messages, f'{topic}: the ROS flight sent other bytes than the embedded one'
 
 
-def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(tmp_path):
+def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str, tmp_path) -> tuple[int, str, Path]:
+    """Start ``run_stack.py --backend ros ARGUMENTS --duration 60 --out TMP/run``, SIGKILL the controller of the
+    vehicle in ``namespace`` once /clock says 3 s of sim time are flown; (exit code, output, bag) of the entry
+    script. Asserts that no node is left running and that the unfinished run left --out alone and said where its
+    closed bag stays (the run's staging folder)."""
     import os
-    import signal
-    import time
     from flight_stack.processes import source_tree_environment
-    from quad_msgs_bridge.review.flight_from_bag import read_flight
+    from quad_msgs_bridge.contract import CLOCK
 
+    sim_time = [0.0]
+    ros_node.create_subscription(rclpy_kit()[CLOCK.type], CLOCK.name,
+                                 lambda msg: sim_time.__setitem__(0, msg.clock.sec + 1e-9 * msg.clock.nanosec),
+                                 qos_profile(CLOCK.qos))
     out = tmp_path / 'run'
     stack = subprocess.Popen(
-        [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', '--namespace', 'killed', '--duration', '60',
+        [sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'ros', *arguments, '--duration', '60',
          '--out', str(out), '--quiet'],
         env=source_tree_environment(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        deadline = time.monotonic() + 60.0
-        controller_pid = None
-        while controller_pid is None and time.monotonic() < deadline:
-            found = subprocess.run(['pgrep', '-f', 'controller_node.*__ns:=/killed'], capture_output=True, text=True)
-            pids = found.stdout.split()
-            if pids and list(tmp_path.glob('run.incomplete-*/bag/metadata.yaml')):   # the run's staging folder
-                time.sleep(3.0)          # well into the flight
-                controller_pid = int(pids[0])
-            else:
-                time.sleep(0.2)
-        assert controller_pid is not None, 'the controller never started'
-        os.kill(controller_pid, signal.SIGKILL)
+        assert spin_until(ros_node, lambda: sim_time[0] >= 3.0, timeout=120.0), 'the flight never reached 3 s'
+        found = subprocess.run(['pgrep', '-P', str(stack.pid), '-f', f'controller_node.*__ns:=/{namespace}( |$)'],
+                               capture_output=True, text=True)
+        [controller_pid] = found.stdout.split()
+        os.kill(int(controller_pid), signal.SIGKILL)
         output, _ = stack.communicate(timeout=120)
     finally:
         if stack.poll() is None:
             stack.kill()
-    assert stack.returncode not in (0, None), output
-    assert 'controller' in output and 'failed' in output
-    leftovers = subprocess.run(['pgrep', '-f', '__ns:=/killed'], capture_output=True, text=True).stdout.split()
+    root = namespace.split('/')[0]
+    leftovers = subprocess.run(['pgrep', '-f', f'__ns:=/{root}'], capture_output=True, text=True).stdout.split()
     assert leftovers == [], 'nodes left running after the entry script exited'
     assert not out.exists()     # an unfinished run leaves nothing in --out; its bag stays in the staging folder
     [bag] = tmp_path.glob('run.incomplete-*/bag')
     assert f'the bag is closed: {bag}' in output
+    return stack.returncode, output, bag
+
+
+def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(ros_node, tmp_path):
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
+
+    code, output, bag = kill_a_controller_mid_flight(ros_node, ['--namespace', 'killed'], 'killed', tmp_path)
+    assert code == 1, output
+    assert 'error: the flight failed: controller (' in output
     flight = read_flight(bag)   # the recorder finalized what it had: readable, a prefix of the flight
-    assert 1.0 < flight.record.time[-1] < 59.0
+    assert 3.0 <= flight.record.time[-1] < 59.0
+
+
+def odometry_values(sample) -> list[float]:
+    """Every value of an odometry: stamp, position, orientation, linear and angular velocity."""
+    return [sample.stamp, *sample.position, *sample.orientation, *sample.linear_velocity, *sample.angular_velocity]
+
+
+def test_a_lockstep_fleet_flies_each_vehicle_exactly_as_it_flies_alone(tmp_path):
+    """Three vehicles on one simulator, over real topics: every message of vehicle k in the fleet's bag is,
+    byte for byte, the message of vehicle k flown alone (the embedded solo flight, which equals the ROS solo
+    flight: test above) with the same offset copy of the scenario; its TF is the k-th transform of each /tf."""
+    from flight_stack.embedded import fly_embedded
+    from flight_stack.ros_backend import RosFlightConfig, fly_ros
+    from nnit2fsmc_controller.factory import load_gains
+    from quad_msgs_bridge.bag.flight_bag import FlightBag
+    from quad_msgs_bridge.bag.writer import jazzy_typestore
+    from quad_msgs_bridge.contract import RECORDED_TOPICS
+    from quad_msgs_bridge.fast_cdr import decode_odometry
+    from quad_msgs_bridge.vehicle_params import load_vehicle_file
+
+    duration = 2.0
+    vehicles = fleet_layout(3, 'fleet_eq')
+    result = fly_ros(RosFlightConfig(
+        vehicles=vehicles, controller='nnit2fsmc', scenario='paper', duration=duration, disturbances=True, seed=0,
+        physics_rate=1000.0, control_rate=1000.0, bag=tmp_path / 'fleet', topics=[t.name for t in RECORDED_TOPICS],
+        settle_time=1.0, quiet=True))
+    assert result.failed_node is None, result
+    assert '3 vehicle(s)' in result.sim_report
+    params, disturbances = load_vehicle_file()
+    typestore = jazzy_typestore()
+    fleet_tf = [typestore.deserialize_cdr(message.data, TF.type).transforms
+                for _, message in recorded(tmp_path / 'fleet', [TF.name])]
+    assert len(fleet_tf) == round(duration * 1000) and all(len(transforms) == 3 for transforms in fleet_tf)
+    fleet_payloads = payloads(tmp_path / 'fleet', 'fleet_eq')
+    for k, vehicle in enumerate(vehicles):
+        solo_bag = tmp_path / f'solo{k}'
+        with FlightBag.create(solo_bag, params, 1.0, namespace=vehicle.namespace) as bag:
+            fly_embedded('nnit2fsmc', make_scenario('paper', duration, vehicle.offset), params, disturbances,
+                         load_gains(), duration, 1000.0, bag=bag)
+        solo = payloads(solo_bag, vehicle.namespace)
+        name = vehicle.namespace.removeprefix('fleet_eq/')
+        fleet_odometry, solo_odometry = (np.array([odometry_values(decode_odometry(data)) for data in messages])
+                                         for messages in (fleet_payloads[f'{name}/odom'], solo['odom']))
+        assert fleet_odometry.shape == solo_odometry.shape == (round(duration * 1000), 14)
+        assert np.abs(fleet_odometry - solo_odometry).max() <= 1e-9
+        for topic, messages in solo.items():
+            if topic.startswith('/'):      # /clock is the fleet's, /tf holds every vehicle
+                continue
+            assert fleet_payloads[f'{name}/{topic}'] == messages, f'{vehicle}: {topic}'
+        solo_tf = [typestore.deserialize_cdr(data, TF.type).transforms[0] for data in solo['/tf']]
+        assert [transforms[k] for transforms in fleet_tf] == solo_tf, vehicle
+        assert solo_tf[0].child_frame_id == f'fleet_eq/uav{k + 1}/base_link'
+    assert fleet_payloads['/clock'] == solo['/clock']
+    last = [transform.transform.translation for transform in fleet_tf[-1]]
+    assert [round(t.y - last[0].y, 6) for t in last] == [0.0, 3.0, 6.0]   # three copies, 3 m apart along y
+
+
+def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_readable(ros_node, tmp_path):
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
+
+    code, output, bag = kill_a_controller_mid_flight(ros_node, ['--vehicles', '2', '--namespace', 'deadfleet'],
+                                                     'deadfleet/uav2', tmp_path)
+    assert code == 1, output
+    assert 'error: the flight failed: controller deadfleet/uav2 (' in output
+    for name in ('uav1', 'uav2'):   # the recorder finalized what it had: each vehicle a readable prefix of its flight
+        flight = read_flight(bag, namespace=f'deadfleet/{name}')
+        assert 3.0 <= flight.record.time[-1] < 59.0
+
+
+def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_only_the_silent_ones(ros_node):
+    """Two vehicles answered by hand: an answer of one alone does not advance sim time; after input_timeout the
+    silent vehicle's odometry (only its) is published again and it is named; its answer completes the step."""
+    kit = rclpy_kit()
+    odometry = {'a': [], 'b': []}
+    forces = {}
+    for name, received in odometry.items():
+        ros_node.create_subscription(kit[ODOM.type], f'/pairing/{name}/odom',
+                                     lambda msg, received=received: received.append(msg.header.stamp.nanosec),
+                                     qos_profile(ODOM.qos))
+        forces[name] = ros_node.create_publisher(kit[ROTOR_FORCES.type], f'/pairing/{name}/rotor_forces',
+                                                 qos_profile(ROTOR_FORCES.qos))
+    sim = node_process('sim', 'quad_sim.sim_node', 'pairing',
+                       {'vehicles': ['a', 'b'], 'initial_state': [0.0] * 24, 'input_timeout': 0.3})
+    hover = rotor_forces_msg(kit, [1.0] * 4)
+    try:
+        assert spin_until(ros_node, lambda: odometry['a'] and odometry['b'] and all(
+            publisher.get_subscription_count() for publisher in forces.values()), timeout=30.0)
+        forces['a'].publish(hover)
+        spin_until(ros_node, lambda: len(odometry['b']) > 1, timeout=1.0)     # past input_timeout: b repeated
+        after_timeout = {name: list(stamps) for name, stamps in odometry.items()}
+        forces['b'].publish(hover)
+        assert spin_until(ros_node, lambda: odometry['a'][-1] == 1_000_000 and odometry['b'][-1] == 1_000_000,
+                          timeout=10.0)
+    finally:
+        codes = stop_all([sim])
+    assert codes == {'sim': 0}
+    assert after_timeout['a'] == [0]                 # a answered: nothing new for it while b is silent
+    assert after_timeout['b'][:2] == [0, 0]          # b's pending odometry again, same stamp: sim time held
+    assert odometry['a'] == [0, 1_000_000] and odometry['b'][-1] == 1_000_000
+    log = '\n'.join(sim.lines)
+    assert 'b: no rotor_forces for 0.3 s at sim time 0.000 s' in log and 'a: no rotor_forces' not in log
+
+
+def tf2_ros_available() -> bool:
+    try:
+        import tf2_ros  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+@pytest.mark.skipif(not tf2_ros_available(), reason=SKIP_REASON if not HAVE_RCLPY else
+                    'tf2_ros (Python) is not installed in the sourced ROS 2')
+def test_tf2_sees_every_vehicle_of_a_fleet_at_its_odometry_pose(ros_node):
+    """A tf2 buffer fed by a TransformListener: odom -> <ns>/base_link at an odometry stamp is that odometry's
+    pose, for each vehicle of a fleet, and one vehicle's frame is found relative to the other's."""
+    from rclpy.time import Time
+    from tf2_ros import Buffer, TransformListener
+
+    kit = rclpy_kit()
+    buffer = Buffer()
+    listener = TransformListener(buffer, ros_node)   # noqa: F841 (it feeds the buffer while the node spins)
+    odometry = {'uav1': [], 'uav2': []}
+    for name, received in odometry.items():
+        ros_node.create_subscription(kit[ODOM.type], f'/tfcheck/{name}/odom', received.append, qos_profile(ODOM.qos))
+    processes = []
+    for name, offset in (('uav1', [0.0, 0.0, 0.0]), ('uav2', [0.0, 3.0, 0.0])):
+        processes += [
+            node_process(f'trajectory {name}', 'nnit2fsmc_controller.trajectory_node', f'tfcheck/{name}',
+                         {'scenario': 'hover', 'start_time': 0.0, 'offset': offset}),
+            node_process(f'controller {name}', 'nnit2fsmc_controller.controller_node', f'tfcheck/{name}', {})]
+    start = Hover().initial_state
+    processes.append(node_process('sim', 'quad_sim.sim_node', 'tfcheck',
+                                  {'vehicles': ['uav1', 'uav2'], 'duration': 3.0, 'wait_for_subscribers': 2,
+                                   'initial_state': start + [start[0], start[1] + 3.0] + start[2:]}))
+    try:
+        assert spin_until(ros_node, lambda: min(map(len, odometry.values())) >= 1000, timeout=60.0)
+        found = {}
+        for name, received in odometry.items():
+            msg = received[900]     # 0.9 s into the flight, well after the listener's first transform
+            transform = buffer.lookup_transform('odom', f'tfcheck/{name}/base_link',
+                                                Time.from_msg(msg.header.stamp))
+            found[name] = (transform, msg)
+        between = buffer.lookup_transform('tfcheck/uav1/base_link', 'tfcheck/uav2/base_link',
+                                          Time.from_msg(odometry['uav1'][900].header.stamp))
+    finally:
+        codes = stop_all(processes)
+    assert all(code == 0 for code in codes.values()), codes
+    for name, (transform, msg) in found.items():
+        assert transform.header.stamp == msg.header.stamp and transform.child_frame_id == f'tfcheck/{name}/base_link'
+        t, r = transform.transform.translation, transform.transform.rotation
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        assert (t.x, t.y, t.z) == (p.x, p.y, p.z)
+        # the buffer stores the rotation normalized again (a last-bit difference); /tf itself carries the
+        # odometry's quaternion exactly (bag-level test)
+        assert (r.x, r.y, r.z, r.w) == pytest.approx((q.x, q.y, q.z, q.w), abs=1e-15)
+    assert found['uav1'][1].pose.pose.position.z > 0.3                  # flying: not the start pose
+    d = between.transform.translation
+    assert math.hypot(d.x, d.y, d.z) == pytest.approx(3.0, abs=0.05)    # two hovering copies 3 m apart
+
+
+def test_without_tf2_msgs_the_simulator_says_so_once_and_flies_without_tf(ros_node, capfd):
+    """The simulator built with a message kit that has no tf2_msgs (as where it is not installed)."""
+    from rclpy.executors import SingleThreadedExecutor
+    from quad_msgs_bridge.conversions import MessageKit
+    from quad_sim.sim_node import SimNode
+
+    real = rclpy_kit()
+
+    def without_tf2_msgs(type_name: str):
+        if type_name.startswith('tf2_msgs/'):
+            raise ModuleNotFoundError("No module named 'tf2_msgs'")
+        return real[type_name]
+
+    sim = SimNode(MessageKit(without_tf2_msgs, real.float_sequence))
+    odometry = []
+    ros_node.create_subscription(real[ODOM.type], '/odom', odometry.append, qos_profile(ODOM.qos))
+    forces = ros_node.create_publisher(real[ROTOR_FORCES.type], '/rotor_forces', qos_profile(ROTOR_FORCES.qos))
+    executor = SingleThreadedExecutor()
+    executor.add_node(sim)
+    executor.add_node(ros_node)
+    try:
+        deadline = time.monotonic() + 30.0
+        while not odometry and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        forces.publish(rotor_forces_msg(real, [1.0] * 4))
+        while len(odometry) < 2 and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        published = dict(sim.get_publisher_names_and_types_by_node(sim.get_name(), sim.get_namespace()))
+    finally:
+        executor.remove_node(sim)
+        sim.destroy_node()
+    assert sim.tf_pub is None and TF.name not in published and '/odom' in published
+    assert [(m.header.stamp.sec, m.header.stamp.nanosec) for m in odometry[:2]] == [(0, 0), (0, 1_000_000)]
+    assert odometry[0].child_frame_id == 'base_link'      # the root namespace's body frame
+    assert capfd.readouterr().err.count('tf2_msgs/msg/TFMessage is not installed') == 1
 
 
 def test_goal_pose_is_flown_to_and_held(ros_node):
@@ -287,10 +494,9 @@ def test_realtime_mode_never_runs_ahead_of_the_wall_clock_and_holds_hover(tmp_pa
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
     duration = 4.0
-    hover = make_scenario('hover', duration)
     result = fly_ros(RosFlightConfig(
-        namespace='realtime', controller='nnit2fsmc', scenario='hover', duration=duration, disturbances=True, seed=0,
-        physics_rate=1000.0, control_rate=1000.0, initial_state=hover.initial_state, bag=tmp_path / 'bag',
+        vehicles=[FleetVehicle('realtime')], controller='nnit2fsmc', scenario='hover', duration=duration,
+        disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0, bag=tmp_path / 'bag',
         topics=[t.name for t in RECORDED_TOPICS], mode='realtime', speed_factor=1.0, settle_time=2.0, quiet=True))
     assert result.failed_node is None, result
     flight = read_flight(tmp_path / 'bag')
@@ -367,10 +573,9 @@ def test_ros2_bag_reads_our_bag_and_our_review_reads_a_ros2_bag_recording_of_the
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
         result = fly_ros(RosFlightConfig(
-            namespace=namespace, controller='nnit2fsmc', scenario='paper', duration=duration, disturbances=True,
-            seed=0, physics_rate=1000.0, control_rate=1000.0, initial_state=make_scenario('paper').initial_state,
-            bag=ours, topics=[t.name for t in RECORDED_TOPICS], settle_time=settle, quiet=True,
-            extra_odom_subscribers=1))
+            vehicles=[FleetVehicle(namespace)], controller='nnit2fsmc', scenario='paper', duration=duration,
+            disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0, bag=ours,
+            topics=[t.name for t in RECORDED_TOPICS], settle_time=settle, quiet=True, extra_odom_subscribers=1))
     finally:
         ros2_bag.send_signal(signal.SIGINT)
         log, _ = ros2_bag.communicate(timeout=60)

@@ -158,7 +158,8 @@ def fake_ros_flight(failed_node):
     """A stand-in for flight_stack.ros_backend.fly_ros (no ROS here): the bag the recorder node would write at
     ``config.bag``, from the embedded loop; then the nodes' outcome: all well, or ``failed_node`` died."""
     def fly_ros(config):
-        with FlightBag.create(config.bag, PARAMS, config.settle_time, namespace=config.namespace,
+        [vehicle] = config.vehicles
+        with FlightBag.create(config.bag, PARAMS, config.settle_time, namespace=vehicle.namespace,
                               controller=config.controller, scenario=config.scenario, backend='ros',
                               seed=config.seed) as bag:
             embedded.fly_embedded(config.controller, make_scenario(config.scenario, config.duration), PARAMS,

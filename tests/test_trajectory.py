@@ -136,5 +136,25 @@ def test_scenario_errors_and_duration_override():
         make_scenario('loop')
     with pytest.raises(ParameterError, match='duration'):
         make_scenario('paper', -1.0)
-    with pytest.raises(ParameterError, match='duration'):
+    with pytest.raises(ParameterError, match='fixed duration of 20 s'):
         make_scenario('waypoints', 10.0)
+    assert make_scenario('waypoints', 20.0) == Waypoints()    # its own length (last waypoint at 16 s, + 4 s hold)
+
+
+def test_a_shifted_scenario_moves_positions_and_start_only():
+    """Helix at t = pi s (w t = pi/2): (R cos, R sin, c t) = (0, 1, 0.1 pi) m, shifted by (1, 3, 0.5) m."""
+    base, shifted = make_scenario('paper'), make_scenario('paper', offset=(1.0, 3.0, 0.5))
+    t = math.pi
+    sample = shifted.sample(t)
+    assert sample.position == pytest.approx((1.0 + 0.0, 3.0 + 1.0, 0.5 + 0.1 * math.pi), abs=1e-12)
+    assert sample._replace(position=None) == base.sample(t)._replace(position=None)   # rates and yaw as they were
+    assert shifted.initial_state == [2.0, 3.0, 0.5] + base.initial_state[3:]        # helix start (R, 0, 0) + offset
+    assert shifted.duration == base.duration
+
+
+def test_a_zero_offset_is_the_scenario_itself_and_a_bad_offset_is_refused():
+    assert make_scenario('hover', offset=(0.0, 0.0, 0.0)) == make_scenario('hover')
+    with pytest.raises(ParameterError, match='offset'):
+        make_scenario('hover', offset=(0.0, 1.0))
+    with pytest.raises(ParameterError, match=r'offset\[1\]'):
+        make_scenario('hover', offset=(0.0, math.inf, 0.0))

@@ -21,7 +21,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
 from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, ODOM,
-                                       ROTOR_FORCES, SETPOINTS)
+                                       ROTOR_FORCES, SETPOINTS, base_frame)
 from quad_msgs_bridge.conversions import MessageKit, goal_from_msg, setpoints_from_msg
 from quad_msgs_bridge.fast_cdr import (decode_odometry, diagnostics_encoder, pose_stamped_encoder, rotor_forces_encoder,
                                        wrench_encoder)
@@ -71,7 +71,7 @@ class ControllerNode(Node):
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs;
         # in realtime (latest_only) a controller that falls behind skips to the newest odometry
         self.encode_forces = rotor_forces_encoder()
-        self.encode_wrench = wrench_encoder(self.params.d)
+        self.encode_wrench = wrench_encoder(self.params.d, base_frame(self.get_namespace()))
         self.encode_reference = pose_stamped_encoder()
         self.encode_diagnostics = diagnostics_encoder()
         subscription(self, kit, ODOM, self.on_odometry, raw=True, depth=1 if latest_only else None)

@@ -158,16 +158,47 @@ class Waypoints:
         return _rest_state_below(self.sample(0.0))
 
 
+@dataclass(frozen=True)
+class Shifted:
+    """``trajectory`` moved by ``offset`` [m, world ENU]: every reference position and the start state's
+    position shifted (a z offset starts the vehicle at rest in the air), velocities, accelerations and
+    yaw unchanged. A fleet flies one shifted copy of its scenario per vehicle."""
+
+    trajectory: object
+    offset: Vec3
+
+    @property
+    def duration(self) -> float:
+        return self.trajectory.duration
+
+    def sample(self, t: float) -> ReferenceSample:
+        sample = self.trajectory.sample(t)
+        return sample._replace(position=tuple(p + d for p, d in zip(sample.position, self.offset)))
+
+    @property
+    def initial_state(self) -> list[float]:
+        state = list(self.trajectory.initial_state)
+        state[0:3] = [p + d for p, d in zip(state[0:3], self.offset)]
+        return state
+
+
 SCENARIOS = {'paper': Helix, 'hover': Hover, 'steps': Steps, 'waypoints': Waypoints}
 
 
-def make_scenario(name: str, duration: float | None = None):
-    """The trajectory of a named scenario; ``duration`` [s] overrides the path length where it has one."""
+def make_scenario(name: str, duration: float | None = None, offset: Vec3 = (0.0, 0.0, 0.0)):
+    """The trajectory of a named scenario; ``duration`` [s] overrides the path length where it can (the
+    waypoints' is fixed: only their own length is accepted, as the ROS backend passes it to every scenario);
+    a non-zero ``offset`` [m, world ENU] shifts the whole scenario (see :class:`Shifted`)."""
     if name not in SCENARIOS:
         raise ParameterError(f'scenario: {name!r} is not one of {", ".join(SCENARIOS)}')
-    if duration is None:
-        return SCENARIOS[name]()
-    duration = check_number('duration', duration, 0.0, low_inclusive=False)
-    if name == 'waypoints':
-        raise ParameterError('duration: the waypoints scenario has a fixed duration (set by its last waypoint)')
-    return SCENARIOS[name](duration=duration)
+    offset = tuple(check_number(f'offset[{i}]', v) for i, v in enumerate(offset))
+    if len(offset) != 3:
+        raise ParameterError(f'offset: expected 3 values (x, y, z [m]), got {len(offset)}')
+    if duration is None or (name == 'waypoints' and duration == Waypoints().duration):   # the length it has
+        trajectory = SCENARIOS[name]()
+    elif name == 'waypoints':
+        raise ParameterError(f'duration: the waypoints scenario has a fixed duration of {Waypoints().duration:g} s '
+                             '(set by its last waypoint)')
+    else:
+        trajectory = SCENARIOS[name](duration=check_number('duration', duration, 0.0, low_inclusive=False))
+    return Shifted(trajectory, offset) if any(offset) else trajectory

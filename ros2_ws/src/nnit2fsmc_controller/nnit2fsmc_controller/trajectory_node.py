@@ -2,12 +2,14 @@
 
 Both are latched (transient local), so a controller or an RViz started later still gets them.
 The path starts at ``start_time`` [s] of the node clock (sim time under use_sim_time); -1 means now.
+``offset`` [m, world ENU] shifts the whole scenario: a fleet flies one shifted copy per vehicle.
+The setpoints' joint is the vehicle's body frame, ``<namespace>/base_link``.
 """
 from __future__ import annotations
 
 from rclpy.node import Node
 
-from quad_msgs_bridge.contract import REFERENCE_PATH, SETPOINTS
+from quad_msgs_bridge.contract import REFERENCE_PATH, SETPOINTS, base_frame
 from quad_msgs_bridge.conversions import MessageKit, path_msg, setpoints_msg
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.ros_helpers import declare, publisher, run_node
@@ -24,14 +26,17 @@ class TrajectoryNode(Node):
         duration = declare(self, 'duration', 0.0, 'path length [s]; 0: the scenario default', (0.0, 1e6))
         rate = declare(self, 'setpoint_rate', 50.0, 'points per second of the published path [Hz]', (0.1, 10000.0))
         start = declare(self, 'start_time', -1.0, 'sim time the path starts at [s]; -1: now', (-1.0, 1e9))
+        offset = declare(self, 'offset', [0.0, 0.0, 0.0],
+                         'x y z [m, world ENU] added to every position of the scenario')
         try:
-            trajectory = make_scenario(scenario, duration or None)
+            trajectory = make_scenario(scenario, duration or None, tuple(offset))
         except ParameterError as error:
-            raise ParameterError(f'parameter scenario/duration: {error}') from error
+            raise ParameterError(f'parameter {error}') from error   # it names scenario, duration or offset
         if start < 0.0:
             start = seconds(self.get_clock().now().nanoseconds)
         path = SetpointPath.sampled(trajectory, start, trajectory.duration, rate)
-        publisher(self, kit, SETPOINTS).publish(setpoints_msg(kit, path))
+        body = base_frame(self.get_namespace())
+        publisher(self, kit, SETPOINTS).publish(setpoints_msg(kit, path, child_frame_id=body))
         publisher(self, kit, REFERENCE_PATH).publish(path_msg(kit, path))
         self.get_logger().info(f'{scenario}: {len(path.times)} setpoints from t={path.start:.3f} s '
                                f'to {path.end:.3f} s published')

@@ -1,8 +1,11 @@
 """The ROS contract of the stack: topic names, message types, QoS and frame ids, defined once.
 
 Names are relative to the vehicle namespace (``/quad/odom`` for namespace ``quad``), except
-``/clock``. QoS is described as plain data here (no rclpy import); the node modules turn it into
-``rclpy.qos.QoSProfile`` and the recorder writes it into the bag's channel metadata.
+``/clock`` and ``/tf``: one of each per ROS graph, shared by every vehicle of a fleet. Frame ids:
+the world frame ``odom`` is shared too, each vehicle's body frame is prefixed with its namespace
+(``uav1/base_link``, see :func:`base_frame`), as TF needs one name per frame. QoS is described as
+plain data here (no rclpy import); the node modules turn it into ``rclpy.qos.QoSProfile`` and the
+recorder writes it into the bag's channel metadata.
 
 Per control update the controller publishes, in this order: ``rotor_forces``, ``control/wrench``,
 ``control/reference`` and ``control/diagnostics``. The stamped ones carry the stamp of the
@@ -10,11 +13,16 @@ odometry they answer; unstamped ones pair with them by order.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
+from typing import Sequence
 
-ODOM_FRAME = 'odom'           #: world frame, ENU (REP 103/105)
-BASE_FRAME = 'base_link'      #: body frame, FLU
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+ODOM_FRAME = 'odom'           #: world frame, ENU (REP 103/105), shared by every vehicle
+BASE_FRAME = 'base_link'      #: body frame, FLU; a vehicle's is prefixed with its namespace: base_frame()
 DEFAULT_NAMESPACE = 'quad'
+_NAMESPACE = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')   #: ROS 2 name tokens
 
 
 @dataclass(frozen=True)
@@ -38,6 +46,9 @@ class TopicSpec:
 
 LOCKSTEP = QosSpec('reliable', 'volatile', 1000)   # history for a slow reader (a recorder) to catch up on
 LATCHED = QosSpec('reliable', 'transient_local', 1)
+#: what tf2 uses for /tf: tf2_ros' DynamicBroadcasterQoS (tf2_ros/qos.hpp) and the Python
+#: TransformBroadcaster's default, QoSProfile(depth=100): reliable, volatile, keep last 100
+TF_QOS = QosSpec('reliable', 'volatile', 100)
 
 ODOM = TopicSpec('odom', 'nav_msgs/msg/Odometry', LOCKSTEP, 'quad_sim -> controller, tools')
 ROTOR_FORCES = TopicSpec('rotor_forces', 'std_msgs/msg/Float64MultiArray', LOCKSTEP, 'controller -> quad_sim')
@@ -52,12 +63,16 @@ CONTROL_DIAGNOSTICS = TopicSpec('control/diagnostics', 'std_msgs/msg/Float64Mult
 GROUND_TRUTH = TopicSpec('ground_truth/odom', 'nav_msgs/msg/Odometry', LOCKSTEP,
                          'simulator -> tools: the true state, recorded when odom carries sensor noise')
 CLOCK = TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', QosSpec('reliable', 'volatile', 10), 'quad_sim -> all')
+TF = TopicSpec('/tf', 'tf2_msgs/msg/TFMessage', TF_QOS,
+               'quad_sim -> tools: odom -> <namespace>/base_link of every vehicle, per odometry step')
 
 ALL_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, GOAL_POSE, CONTROL_WRENCH,
-              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, GROUND_TRUTH)
+              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, TF, GROUND_TRUTH)
 #: what a flight bag records by default
 RECORDED_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, CONTROL_WRENCH, CONTROL_REFERENCE,
-                   CONTROL_DIAGNOSTICS, CLOCK)
+                   CONTROL_DIAGNOSTICS, CLOCK, TF)
+#: the simulator's topics (the others are the controller's, the trajectory's and the tools')
+SIMULATOR_TOPICS = (ODOM, CLOCK, TF, GROUND_TRUTH)
 
 
 def resolve(topic: TopicSpec, namespace: str) -> str:
@@ -66,3 +81,40 @@ def resolve(topic: TopicSpec, namespace: str) -> str:
         return topic.name
     namespace = namespace.strip('/')
     return f'/{namespace}/{topic.name}' if namespace else f'/{topic.name}'
+
+
+def resolve_all(topics, namespaces) -> list[tuple[str, TopicSpec]]:
+    """(absolute name, topic) of every topic in every namespace, each name once (``/clock`` and ``/tf``
+    once for the whole fleet), in the order of ``namespaces`` then ``topics``."""
+    names: dict[str, TopicSpec] = {}
+    for namespace in namespaces:
+        for topic in topics:
+            names.setdefault(resolve(topic, namespace), topic)
+    return list(names.items())
+
+
+def base_frame(namespace: str) -> str:
+    """Body frame id of the vehicle in ``namespace``: ``uav1/base_link`` for ``/uav1``, ``base_link`` in the
+    root namespace (TF frame ids carry no leading '/')."""
+    namespace = namespace.strip('/')
+    return f'{namespace}/{BASE_FRAME}' if namespace else BASE_FRAME
+
+
+def vehicle_namespaces(node_namespace: str, names: Sequence[str]) -> list[str]:
+    """Absolute namespaces of the vehicles ``names``, each relative to ``node_namespace`` ('' is the node's own
+    namespace, a leading '/' makes a name absolute); ParameterError for an invalid, repeated or missing name."""
+    if not names:
+        raise ParameterError('parameter vehicles: at least one vehicle is needed')
+    base = node_namespace.strip('/')
+    namespaces = []
+    for name in names:
+        relative = name.strip('/')
+        if relative and not _NAMESPACE.fullmatch(relative):
+            raise ParameterError(f'parameter vehicles: {name!r} is not a valid namespace (names of letters, digits '
+                                 'and underscores, not starting with a digit, separated by /)')
+        parts = [relative] if name.startswith('/') else [base, relative]
+        namespaces.append('/' + '/'.join(p for p in parts if p))
+    repeated = sorted({ns for ns in namespaces if namespaces.count(ns) > 1})
+    if repeated:
+        raise ParameterError(f'parameter vehicles: {repeated[0]} is given more than once')
+    return namespaces

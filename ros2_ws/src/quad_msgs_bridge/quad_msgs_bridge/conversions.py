@@ -164,6 +164,22 @@ def odometry_from_msg(msg) -> OdometrySample:
     return sample
 
 
+def tf_msg(kit: MessageKit, t: float, samples: Sequence[OdometrySample], child_frame_ids: Sequence[str],
+           frame_id: str = ODOM_FRAME):
+    """tf2_msgs/TFMessage with one geometry_msgs/TransformStamped per vehicle, all stamped ``t`` [s]:
+    ``frame_id`` -> ``child_frame_ids[k]`` is the pose of ``samples[k]`` (REP 105: odom -> base_link is
+    the body's position [m] and orientation in the world frame, as the odometry's pose)."""
+    if len(samples) != len(child_frame_ids):
+        raise ValueError(f'tf: {len(samples)} poses for {len(child_frame_ids)} child frames')
+    transform = kit['geometry_msgs/msg/Transform']
+    stamped = kit['geometry_msgs/msg/TransformStamped']
+    return kit['tf2_msgs/msg/TFMessage'](transforms=[
+        stamped(header=header_msg(kit, t, frame_id), child_frame_id=child,
+                transform=transform(translation=vector3_msg(kit, sample.position),
+                                    rotation=quaternion_msg(kit, sample.orientation)))
+        for sample, child in zip(samples, child_frame_ids)])
+
+
 def rotor_forces_msg(kit: MessageKit, forces: Sequence[float]):
     """std_msgs/Float64MultiArray of the four rotor thrusts [N], layout labelled with the rotor order."""
     _finite(forces, 'rotor forces')

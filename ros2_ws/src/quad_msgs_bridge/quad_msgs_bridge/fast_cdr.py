@@ -2,9 +2,9 @@
 the two the lockstep loop receives (odometry, rotor forces).
 
 Each encoder is one precompiled :class:`struct.Struct`: the 4-byte CDR encapsulation header
-(little endian), the header stamp, the constant bytes (frame ids, array layouts) baked in once,
-then the float64 fields, with CDR alignment padding and all-zero blocks (covariances) as struct
-pad bytes. The bytes equal ``typestore.serialize_cdr(conversions.<x>_msg(rosbags_kit(), ...))``
+(little endian), then the fields in message order: stamps, constant bytes (frame ids, array
+layouts) made once, float64 fields, with CDR alignment padding and all-zero blocks (covariances)
+as struct pad bytes. The bytes equal ``typestore.serialize_cdr(conversions.<x>_msg(rosbags_kit(), ...))``
 for the same inputs (proved by the tests) at a small fraction of the cost; every value is packed
 as the float64 the message would carry.
 
@@ -28,33 +28,44 @@ ENCAPSULATION = b'\x00\x01\x00\x00'
 
 
 class CdrLayout:
-    """The layout of a fixed-size CDR message: constant bytes, then float64 fields and zero blocks.
+    """The layout of a fixed-size CDR message: constant bytes, stamps, float64 fields and zero blocks.
 
     Fields are added in message order; alignment is relative to the start of the CDR body (after
-    the encapsulation header). All constant fields must precede the first float64 field, which
-    holds for every message encoded here.
+    the encapsulation header). The layout compiles into one struct: a constant (frame ids, array
+    layouts, sequence lengths; adjacent ones merged) is an ``s`` field whose bytes :meth:`compile`
+    returns, to be passed at encoding time; alignment padding and zero blocks are pad bytes.
     """
 
-    def __init__(self, stamped: bool):
-        self.stamped = stamped
-        self._size = 8 if stamped else 0      # builtin_interfaces/Time: int32 sec, uint32 nanosec
-        self._constant = bytearray()
-        self._floats: list[str] = []          # struct format of the variable part
+    def __init__(self):
+        self._size = 0
+        self._pieces: list[str | int] = []    # struct formats, or the index of a constant
+        self._constants: list[bytearray] = []
+        self._constant_open = False           # the last piece is a constant: padding and constants extend it
+
+    def _pad(self, count: int) -> None:
+        if self._constant_open:
+            self._constants[-1] += bytes(count)
+        else:
+            self._pieces.append(f'{count}x')
+        self._size += count
 
     def _align(self, alignment: int) -> None:
         pad = -self._size % alignment
-        self._size += pad
-        if self._floats:
-            if pad:
-                self._floats.append(f'{pad}x')
-        else:
-            self._constant += bytes(pad)
+        if pad:
+            self._pad(pad)
 
     def _add_constant(self, data: bytes) -> None:
-        if self._floats:
-            raise ValueError('constant fields must precede the float64 fields')
-        self._constant += data
+        if not self._constant_open:
+            self._pieces.append(len(self._constants))
+            self._constants.append(bytearray())
+            self._constant_open = True
+        self._constants[-1] += data
         self._size += len(data)
+
+    def _add_variable(self, format_: str, size: int) -> None:
+        self._pieces.append(format_)
+        self._size += size
+        self._constant_open = False
 
     def uint32(self, value: int) -> None:
         self._align(4)
@@ -65,27 +76,32 @@ class CdrLayout:
         self.uint32(len(data))
         self._add_constant(data)
 
+    def stamp(self) -> None:
+        """A ``builtin_interfaces/Time`` given at encoding time: int32 sec, uint32 nanosec."""
+        self._align(4)
+        self._add_variable('iI', 8)
+
     def float64(self, count: int) -> None:
         """``count`` float64 fields given at encoding time."""
         self._align(8)
-        self._floats.append(f'{count}d')
-        self._size += 8 * count
+        self._add_variable(f'{count}d', 8 * count)
 
     def zeros(self, count: int) -> None:
         """``count`` float64 fields that are always zero (e.g. a covariance the simulator leaves unset)."""
         self._align(8)
-        self._floats.append(f'{8 * count}x')
-        self._size += 8 * count
+        self._add_variable(f'{8 * count}x', 8 * count)
 
-    def compile(self) -> tuple[struct.Struct, bytes]:
-        """(struct, constant): pack(ENCAPSULATION, [sec, nanosec,] constant, *floats) is the message."""
-        head = '<4siI' if self.stamped else '<4s'
-        return struct.Struct(f'{head}{len(self._constant)}s{"".join(self._floats)}'), bytes(self._constant)
+    def compile(self) -> tuple[struct.Struct, tuple[bytes, ...]]:
+        """(struct, constants): pack(ENCAPSULATION, *fields) is the message, with the fields in message
+        order, each constant where it sits (the stamps and floats in between)."""
+        pieces = ''.join(piece if isinstance(piece, str) else f'{len(self._constants[piece])}s'
+                         for piece in self._pieces)
+        return struct.Struct(f'<4s{pieces}'), tuple(bytes(c) for c in self._constants)
 
 
 def _multi_array_layout(dims: Sequence[tuple[str, int]]) -> CdrLayout:
     """Layout of a std_msgs/Float64MultiArray with these (label, size) dimensions, row-major, data_offset 0."""
-    layout = CdrLayout(stamped=False)
+    layout = CdrLayout()
     layout.uint32(len(dims))
     count = 1
     for label, size, stride in multi_array_dimensions(dims):
@@ -102,14 +118,15 @@ def _multi_array_layout(dims: Sequence[tuple[str, int]]) -> CdrLayout:
 def odometry_encoder(frame_id: str = ODOM_FRAME, child_frame_id: str = BASE_FRAME
                      ) -> Callable[[int, int, OdometrySample], bytes]:
     """encode(sec, nanosec, sample) -> CDR of ``conversions.odometry_msg(kit, sample, frame_id, child_frame_id)``."""
-    layout = CdrLayout(stamped=True)
+    layout = CdrLayout()
+    layout.stamp()
     layout.string(frame_id)
     layout.string(child_frame_id)
     layout.float64(7)      # pose: position [m], orientation (x, y, z, w)
     layout.zeros(36)       # pose covariance
     layout.float64(6)      # twist: linear [m/s], angular [rad/s], body frame
     layout.zeros(36)       # twist covariance
-    pack, constant = layout.compile()
+    pack, (constant,) = layout.compile()
     pack = pack.pack
 
     def encode(sec: int, nanosec: int, sample: OdometrySample) -> bytes:
@@ -123,7 +140,7 @@ def rotor_forces_encoder() -> Callable[[Sequence[float]], bytes]:
 
     Unlike rotor_forces_msg it does not check the values: it records what was sent.
     """
-    pack, constant = _multi_array_layout(ROTOR_FORCES_DIMS).compile()
+    pack, (constant,) = _multi_array_layout(ROTOR_FORCES_DIMS).compile()
     pack = pack.pack
 
     def encode(forces: Sequence[float]) -> bytes:
@@ -133,7 +150,7 @@ def rotor_forces_encoder() -> Callable[[Sequence[float]], bytes]:
 
 def diagnostics_encoder() -> Callable[[Sequence[float], Sequence[float], Sequence[float]], bytes]:
     """encode(surfaces, equivalent, corrective) -> CDR of ``conversions.diagnostics_msg(kit, ...)``."""
-    pack, constant = _multi_array_layout(DIAGNOSTICS_DIMS).compile()
+    pack, (constant,) = _multi_array_layout(DIAGNOSTICS_DIMS).compile()
     pack = pack.pack
     interleave = chain.from_iterable
 
@@ -149,10 +166,11 @@ def wrench_encoder(arm_length: float, frame_id: str = BASE_FRAME
     controls are U1 [N], U2 [N], U3 [N], U4 [N m]; the wrench is force (0, 0, U1) [N] and torque
     (d U2, d U3, U4) [N m] in the body frame, d = ``arm_length`` [m].
     """
-    layout = CdrLayout(stamped=True)
+    layout = CdrLayout()
+    layout.stamp()
     layout.string(frame_id)
     layout.float64(6)      # force, torque
-    pack, constant = layout.compile()
+    pack, (constant,) = layout.compile()
     pack = pack.pack
 
     def encode(sec: int, nanosec: int, controls: Sequence[float]) -> bytes:
@@ -166,10 +184,11 @@ def pose_stamped_encoder(frame_id: str = ODOM_FRAME) -> Callable[[int, int, Sequ
 
     position [m, ``frame_id``], yaw [rad] (orientation: roll and pitch zero).
     """
-    layout = CdrLayout(stamped=True)
+    layout = CdrLayout()
+    layout.stamp()
     layout.string(frame_id)
     layout.float64(7)      # position, orientation
-    pack, constant = layout.compile()
+    pack, (constant,) = layout.compile()
     pack = pack.pack
 
     def encode(sec: int, nanosec: int, position: Sequence[float], yaw: float) -> bytes:
@@ -179,11 +198,40 @@ def pose_stamped_encoder(frame_id: str = ODOM_FRAME) -> Callable[[int, int, Sequ
 
 def clock_encoder() -> Callable[[int, int], bytes]:
     """encode(sec, nanosec) -> CDR of ``conversions.clock_msg(kit, t)``."""
-    pack, constant = CdrLayout(stamped=True).compile()
-    pack = pack.pack
+    layout = CdrLayout()
+    layout.stamp()
+    pack = layout.compile()[0].pack
 
     def encode(sec: int, nanosec: int) -> bytes:
-        return pack(ENCAPSULATION, sec, nanosec, constant)
+        return pack(ENCAPSULATION, sec, nanosec)
+    return encode
+
+
+def tf_encoder(child_frame_ids: Sequence[str], frame_id: str = ODOM_FRAME
+               ) -> Callable[[int, int, Sequence[OdometrySample]], bytes]:
+    """encode(sec, nanosec, samples) -> CDR of ``conversions.tf_msg(kit, t, samples, child_frame_ids, frame_id)``.
+
+    One tf2_msgs/TFMessage per odometry step: transform k is ``frame_id`` -> ``child_frame_ids[k]``,
+    the pose of ``samples[k]`` (position [m], orientation of the body in ``frame_id``), all stamped
+    (sec, nanosec).
+    """
+    layout = CdrLayout()
+    layout.uint32(len(child_frame_ids))     # sequence length
+    for child_frame_id in child_frame_ids:  # geometry_msgs/TransformStamped
+        layout.stamp()
+        layout.string(frame_id)
+        layout.string(child_frame_id)
+        layout.float64(7)                   # translation, rotation (x, y, z, w)
+    pack, (count, *frames) = layout.compile()
+    pack = pack.pack
+
+    def encode(sec: int, nanosec: int, samples: Sequence[OdometrySample]) -> bytes:
+        if len(samples) != len(frames):
+            raise ValueError(f'tf: {len(samples)} poses for {len(frames)} child frames')
+        fields = [ENCAPSULATION, count]
+        for frame_ids, sample in zip(frames, samples):
+            fields += (sec, nanosec, frame_ids, *sample.position, *sample.orientation)
+        return pack(*fields)
     return encode
 
 

@@ -18,7 +18,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-from quad_msgs_bridge.contract import QosSpec, TopicSpec
+from quad_msgs_bridge.contract import QosSpec, TopicSpec, resolve
 from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
 from quad_msgs_bridge.vehicle_params import ParameterError
 
@@ -32,16 +32,22 @@ def qos_profile(spec: QosSpec) -> QoSProfile:
                       reliability=_RELIABILITY[spec.reliability], durability=_DURABILITY[spec.durability])
 
 
-def publisher(node: Node, kit: MessageKit, topic: TopicSpec):
-    """A publisher of a contract topic, relative names resolved in the node's namespace."""
-    return node.create_publisher(kit[topic.type], topic.name, qos_profile(topic.qos))
+def _topic_name(topic: TopicSpec, namespace: str | None) -> str:
+    return topic.name if namespace is None else resolve(topic, namespace)
+
+
+def publisher(node: Node, kit: MessageKit, topic: TopicSpec, namespace: str | None = None):
+    """A publisher of a contract topic, relative names resolved in ``namespace`` (default: the node's)."""
+    return node.create_publisher(kit[topic.type], _topic_name(topic, namespace), qos_profile(topic.qos))
 
 
 def subscription(node: Node, kit: MessageKit, topic: TopicSpec, callback: Callable, raw: bool = False,
-                 depth: int | None = None):
-    """A subscription to a contract topic; ``raw``: the callback gets the CDR bytes; ``depth`` overrides the history."""
+                 depth: int | None = None, namespace: str | None = None):
+    """A subscription to a contract topic, relative names resolved in ``namespace`` (default: the node's);
+    ``raw``: the callback gets the CDR bytes; ``depth`` overrides the history."""
     qos = topic.qos if depth is None else replace(topic.qos, depth=depth)
-    return node.create_subscription(kit[topic.type], topic.name, callback, qos_profile(qos), raw=raw)
+    return node.create_subscription(kit[topic.type], _topic_name(topic, namespace), callback, qos_profile(qos),
+                                    raw=raw)
 
 
 def declare(node: Node, name: str, default: Any, description: str,

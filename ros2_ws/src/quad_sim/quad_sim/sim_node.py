@@ -1,33 +1,43 @@
-"""quad_sim node: the simulator core behind ``/clock``, ``odom`` and ``rotor_forces``.
+"""quad_sim node: one or several vehicles on one sim clock, behind ``/clock``, ``/tf``, ``odom`` and ``rotor_forces``.
+
+The vehicles are named by ``vehicles`` (namespaces relative to the node's; by default one vehicle,
+in the node's own namespace) and start from their slices of ``initial_state``. The node publishes
+one ``/clock`` for all, each vehicle's ``odom`` in that vehicle's namespace (child frame
+``<namespace>/base_link``) and, with each odometry step, one ``/tf`` message holding every
+vehicle's ``odom -> <namespace>/base_link`` (its odometry pose, same stamp). Where ``tf2_msgs`` is
+not installed it says so once and runs without TF.
 
 Modes:
-* lockstep (default): publish ``/clock`` and ``odom`` for time t, wait for the ``rotor_forces``
-  that answer them, integrate to the next odometry time, repeat. Sim time only advances when the
-  controller has answered, so a run is deterministic and can be faster than real time. If no
-  answer comes within ``input_timeout`` seconds of wall time the pending odometry is published
-  again (a controller that restarted gets it; one that already answered ignores the repeat).
+* lockstep (default): publish ``/clock``, every ``odom`` and ``/tf`` for time t, wait until every
+  vehicle's controller has answered with its ``rotor_forces`` (answers paired by vehicle), integrate
+  every vehicle to the next odometry time, repeat. Sim time only advances when all have answered,
+  so a run is deterministic and can be faster than real time, and each vehicle flies exactly the
+  flight it would fly alone. If a vehicle's answer does not come within ``input_timeout`` seconds
+  of wall time, its pending odometry is published again (a controller that restarted gets it; one
+  that already answered ignores the repeat) and the vehicle is named in a warning.
 * realtime: a wall timer keeps sim time at ``speed_factor`` times the wall time elapsed, integrating
   the control steps that are due (those of missed ticks too) with the latest forces and publishing
-  the newest odometry. Forces older than ``input_timeout`` are stale: the rotors go to hover thrust.
+  the newest odometry. A vehicle whose forces are older than ``input_timeout`` goes to hover thrust.
 
-Non-finite or malformed forces are rejected (throttled error log), the last valid forces hold.
+Non-finite or malformed forces are rejected (throttled error log), the vehicle's last valid forces hold.
 """
 from __future__ import annotations
 
 import time
+from functools import partial
 
 import rclpy
 from rclpy.node import Node
 
-from quad_msgs_bridge.contract import CLOCK, ODOM, ROTOR_FORCES
+from quad_msgs_bridge.contract import CLOCK, ODOM, ODOM_FRAME, ROTOR_FORCES, TF, base_frame, resolve, vehicle_namespaces
 from quad_msgs_bridge.conversions import MessageKit
-from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder
+from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder, tf_encoder
 from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
 from quad_msgs_bridge.timebase import stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
+from .fleet import Fleet, LockstepAnswers, split_initial_states
 from .model import QuadrotorModel
-from .simulator import Simulator
 
 MODES = ('lockstep', 'realtime')
 MAX_CATCH_UP = 100   #: realtime: most control steps integrated in one timer tick after a stall
@@ -52,34 +62,54 @@ class SimNode(Node):
         self.duration = declare(self, 'duration', 0.0, 'stop stepping at this sim time [s]; 0: never', (0.0, 1e7))
         self.wait_for_subscribers = declare(
             self, 'wait_for_subscribers', 1,
-            'start once odom has this many subscribers (the controller, plus any recorder)', (1, 1000))
+            "start once each vehicle's odom has this many subscribers (its controller, plus any recorder)", (1, 1000))
         self.start_delay = declare(self, 'start_delay', 0.0,
                                    'wall seconds to wait once the subscribers are there, before the first step '
                                    '(a late recorder such as ros2 bag record then has all its topics matched)',
                                    (0.0, 60.0))
         self.exit_at_end = declare(self, 'exit_at_end', False, 'shut the node down once duration is reached')
+        names = declare(self, 'vehicles', [''],
+                        "namespaces of the simulated vehicles, relative to the node's ('': the node's own, the "
+                        "default; a leading / makes one absolute): each has odom, rotor_forces and the body frame "
+                        '<namespace>/base_link')
         start = declare(self, 'initial_state', [0.0] * 12,
-                        'x y z [m] vx vy vz [m/s] phi theta psi [rad] dphi dtheta dpsi [rad/s], world ENU')
+                        '12 values per vehicle, in the order of vehicles: x y z [m] vx vy vz [m/s] '
+                        'phi theta psi [rad] dphi dtheta dpsi [rad/s], world ENU')
+        publish_tf = declare(self, 'publish_tf', True,
+                             'broadcast odom -> <namespace>/base_link of every vehicle on /tf with each odometry')
         substeps = physics_rate / odometry_rate
         if abs(substeps - round(substeps)) > 1e-9:
             raise ParameterError(f'parameter physics_rate: {physics_rate} Hz is not a whole multiple of '
                                  f'odometry_rate {odometry_rate} Hz')
         self.substeps = int(round(substeps))
+        namespaces = vehicle_namespaces(self.get_namespace(), names)
         try:
-            self.sim = Simulator(QuadrotorModel(params, disturbances), 1.0 / physics_rate, list(start))
+            self.fleet = Fleet(QuadrotorModel(params, disturbances), 1.0 / physics_rate,
+                               split_initial_states(start, len(namespaces)))
+        except ParameterError:
+            raise
         except ValueError as error:
             raise ParameterError(f'parameter initial_state: {error}') from error
+        self.names = [namespace.strip('/') or '/' for namespace in namespaces]   #: for the logs
         self.hover_forces = (params.hover_force,) * 4
+        frames = [base_frame(namespace) for namespace in namespaces]
         self.clock_pub = publisher(self, kit, CLOCK)
-        self.odom_pub = publisher(self, kit, ODOM)
+        self.odom_pubs = [publisher(self, kit, ODOM, namespace) for namespace in namespaces]
+        self.odom_names = [resolve(ODOM, namespace) for namespace in namespaces]
+        self.forces_names = [resolve(ROTOR_FORCES, namespace) for namespace in namespaces]
+        self.tf_pub = self.tf_publisher(kit) if publish_tf else None
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs
         self.encode_clock = clock_encoder()
-        self.encode_odometry = odometry_encoder()
-        self.forces_sub = subscription(self, kit, ROTOR_FORCES, self.on_forces, raw=True)
-        self.last_forces_wall = time.monotonic()
+        self.encode_odometry = [odometry_encoder(ODOM_FRAME, frame) for frame in frames]
+        self.encode_tf = tf_encoder(frames)
+        for vehicle, namespace in enumerate(namespaces):
+            subscription(self, kit, ROTOR_FORCES, partial(self.on_forces, vehicle), raw=True, namespace=namespace)
+        self.answers = LockstepAnswers(len(namespaces))
+        self.last_forces_wall = [time.monotonic()] * len(namespaces)   #: realtime: each vehicle's last forces
+        self.last_publish_wall = time.monotonic()   #: lockstep: the pending odometry was (re)published then
         self.started = False
         self.subscribed_since: float | None = None   #: wall time the start condition first held
-        self.stale = False
+        self.stale: set[int] = set()                 #: vehicles in a stale-input episode
         self.finished = False
         self.first_publish_wall: float | None = None
         self.published = 0
@@ -91,27 +121,43 @@ class SimNode(Node):
             self.control_steps = 0
             self.step_timer = self.create_timer(1.0 / odometry_rate / self.speed_factor, self.realtime_step)
         self.get_logger().info(
-            f'{self.mode} simulation: physics {physics_rate:g} Hz, odometry {odometry_rate:g} Hz, '
-            f'disturbances {"on" if disturbances.enabled else "off"}')
+            f'{self.mode} simulation of {len(namespaces)} vehicle(s) ({", ".join(self.names)}): physics '
+            f'{physics_rate:g} Hz, odometry {odometry_rate:g} Hz, disturbances '
+            f'{"on" if disturbances.enabled else "off"}, TF {"on" if self.tf_pub else "off"}')
+
+    def tf_publisher(self, kit: MessageKit):
+        """The ``/tf`` publisher, or None (said once) where tf2_msgs is not installed."""
+        try:
+            return publisher(self, kit, TF)
+        except ImportError as error:
+            self.get_logger().warning(f'{TF.type} is not installed ({error}): running without TF, nothing on {TF.name}')
+            return None
 
     # --- shared -----------------------------------------------------------------------------
-    def publish_odometry(self) -> None:
-        sample = self.sim.odometry()
-        sec, nanosec = stamp_fields(sample.stamp)
+    def publish_odometry(self, vehicles=None) -> None:
+        """/clock, the odometry of ``vehicles`` (default all) and, for a new step, /tf."""
+        samples = self.fleet.odometry()
+        sec, nanosec = stamp_fields(samples[0].stamp)
         self.clock_pub.publish(self.encode_clock(sec, nanosec))
-        self.odom_pub.publish(self.encode_odometry(sec, nanosec, sample))
+        for vehicle in range(len(samples)) if vehicles is None else vehicles:
+            self.odom_pubs[vehicle].publish(self.encode_odometry[vehicle](sec, nanosec, samples[vehicle]))
+        if vehicles is None and self.tf_pub is not None:   # a repeat would be a redundant TF (tf2 warns about it)
+            self.tf_pub.publish(self.encode_tf(sec, nanosec, samples))
         now = time.monotonic()
+        self.last_publish_wall = now
         if self.first_publish_wall is None:
             self.first_publish_wall = now
-        self.published += 1
+        if vehicles is None:      # a repeat is not a new step
+            self.published += 1
 
     def timing_report(self) -> str:
         wall = time.monotonic() - (self.first_publish_wall or time.monotonic())
         rate = self.published / wall if wall > 0 else 0.0
-        return f'{self.published} odometry steps in {wall:.3f} s wall: {rate:.1f} steps/s'
+        return (f'{self.published} odometry steps of {len(self.fleet)} vehicle(s) in {wall:.3f} s wall: '
+                f'{rate:.1f} steps/s')
 
     def at_end(self) -> bool:
-        if self.duration > 0.0 and self.sim.time >= self.duration - 1e-12:
+        if self.duration > 0.0 and self.fleet.time >= self.duration - 1e-12:
             if not self.finished:
                 self.finished = True
                 self.get_logger().info(f'reached duration {self.duration:g} s of sim time; {self.timing_report()}')
@@ -120,58 +166,61 @@ class SimNode(Node):
             return True
         return False
 
-    def accept(self, data: bytes) -> bool:
+    def accept(self, vehicle: int, data: bytes) -> bool:
         try:
             forces = decode_rotor_forces(data)
         except ValueError as error:
-            self.get_logger().error(f'rejected rotor_forces: {error}', throttle_duration_sec=1.0)
+            self.get_logger().error(f'{self.names[vehicle]}: rejected rotor_forces: {error}',
+                                    throttle_duration_sec=1.0)
             return False
-        return self.sim.set_forces(forces)
+        return self.fleet.set_forces(vehicle, forces)
 
-    # --- lockstep ---------------------------------------------------------------------------
     def ready(self) -> bool:
-        """Start ``start_delay`` after ``odom`` has its subscribers and a controller publishes ``rotor_forces``."""
+        """Start ``start_delay`` after every vehicle's ``odom`` has its subscribers and a controller publishes its
+        ``rotor_forces``."""
         if self.started:
             return True
         now = time.monotonic()
-        if not (self.count_subscribers(ODOM.name) >= self.wait_for_subscribers
-                and self.count_publishers(ROTOR_FORCES.name) > 0):
+        if not all(self.count_subscribers(odom) >= self.wait_for_subscribers and self.count_publishers(forces) > 0
+                   for odom, forces in zip(self.odom_names, self.forces_names)):
             self.subscribed_since = None
         elif self.subscribed_since is None:
             self.subscribed_since = now
         if self.subscribed_since is not None and now - self.subscribed_since >= self.start_delay:
             self.started = True
-            self.last_forces_wall = now
+            self.last_forces_wall = [now] * len(self.fleet)
         return self.started
 
+    # --- lockstep ---------------------------------------------------------------------------
     def lockstep_watchdog(self) -> None:
         if not self.started:
             if self.ready():
                 self.publish_odometry()
             return
-        if self.finished or time.monotonic() - self.last_forces_wall < self.input_timeout:
+        if self.finished or time.monotonic() - self.last_publish_wall < self.input_timeout:
             return
-        if not self.stale:
-            self.stale = True
-            self.get_logger().warning(
-                f'no rotor_forces for {self.input_timeout:g} s at sim time {self.sim.time:.3f} s; '
-                'holding sim time and publishing the pending odometry again')
-        self.last_forces_wall = time.monotonic()
-        self.published -= 1       # a repeat is not a new step
-        self.publish_odometry()
+        silent = sorted(self.answers.waiting)
+        for vehicle in silent:
+            if vehicle not in self.stale:
+                self.stale.add(vehicle)
+                self.get_logger().warning(
+                    f'{self.names[vehicle]}: no rotor_forces for {self.input_timeout:g} s at sim time '
+                    f'{self.fleet.time:.3f} s; holding sim time and publishing its pending odometry again')
+        self.publish_odometry(silent)
 
-    def on_forces(self, data: bytes) -> None:
+    def on_forces(self, vehicle: int, data: bytes) -> None:
         if self.mode == 'realtime':
-            if self.accept(data):
-                self.last_forces_wall = time.monotonic()
-                self.stale = False
+            if self.accept(vehicle, data):
+                self.last_forces_wall[vehicle] = time.monotonic()
+                self.stale.discard(vehicle)
             return
         if not self.started or self.finished:
             return
-        self.accept(data)   # a rejected message still answers: the last valid forces hold
-        self.last_forces_wall = time.monotonic()
-        self.stale = False
-        self.sim.advance(self.substeps)
+        self.accept(vehicle, data)   # a rejected message still answers: the last valid forces hold
+        self.stale.discard(vehicle)
+        if not self.answers.answer(vehicle):
+            return
+        self.fleet.advance(self.substeps)
         if not self.at_end():
             self.publish_odometry()
 
@@ -186,13 +235,15 @@ class SimNode(Node):
         due = int((now - self.realtime_origin) * self.speed_factor * self.odometry_rate) - self.control_steps
         if due <= 0:
             return
-        if now - self.last_forces_wall > self.input_timeout:
-            if not self.stale:
-                self.stale = True
-                self.get_logger().warning(f'rotor_forces stale for {self.input_timeout:g} s: rotors at hover thrust')
-            self.sim.set_forces(self.hover_forces)
+        for vehicle, last in enumerate(self.last_forces_wall):
+            if now - last > self.input_timeout:
+                if vehicle not in self.stale:
+                    self.stale.add(vehicle)
+                    self.get_logger().warning(f'{self.names[vehicle]}: rotor_forces stale for '
+                                              f'{self.input_timeout:g} s: rotors at hover thrust')
+                self.fleet.set_forces(vehicle, self.hover_forces)
         for _ in range(min(due, MAX_CATCH_UP)):
-            self.sim.advance(self.substeps)
+            self.fleet.advance(self.substeps)
             self.control_steps += 1
             if self.at_end():
                 return

@@ -1,9 +1,11 @@
 """Recording a flight computed in-process (embedded backend): the contract topics, one step at a time.
 
 Per control step the bag gets what the ROS flight publishes, in the same order and with the same
-sim-time stamps: ``/clock`` and ``odom`` (simulator), then ``rotor_forces``, ``control/wrench``,
-``control/reference`` and ``control/diagnostics`` (controller). Every message of a step is logged
-at that step's odometry stamp [ns]; ``setpoints`` and ``reference_path`` once, at the path start.
+sim-time stamps: ``/clock``, ``odom`` and ``/tf`` (simulator: one TFMessage, ``odom`` ->
+``<namespace>/base_link``), then ``rotor_forces``, ``control/wrench``, ``control/reference`` and
+``control/diagnostics`` (controller). The body frame is the namespaced one the nodes use. Every
+message of a step is logged at that step's odometry stamp [ns]; ``setpoints`` and
+``reference_path`` once, at the path start.
 The run's vehicle parameters and settings go into the bag's custom data, so a review finds the arm
 length and the rotor limits without the vehicle file.
 """
@@ -16,11 +18,11 @@ from typing import Sequence
 
 from quad_msgs_bridge.bag.writer import BagWriter
 from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, DEFAULT_NAMESPACE,
-                                       GROUND_TRUTH, ODOM, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS,
-                                       TopicSpec, resolve)
+                                       GROUND_TRUTH, ODOM, ODOM_FRAME, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES,
+                                       SETPOINTS, TF, TopicSpec, base_frame, resolve)
 from quad_msgs_bridge.conversions import path_msg, rosbags_kit, setpoints_msg
 from quad_msgs_bridge.fast_cdr import (clock_encoder, diagnostics_encoder, odometry_encoder, pose_stamped_encoder,
-                       rotor_forces_encoder, wrench_encoder)
+                                       rotor_forces_encoder, tf_encoder, wrench_encoder)
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND, nanoseconds
@@ -63,12 +65,14 @@ class FlightBag:
         self._clock, self._odom, self._forces = name(CLOCK), name(ODOM), name(ROTOR_FORCES)
         self._wrench, self._reference, self._diagnostics = name(CONTROL_WRENCH), name(CONTROL_REFERENCE), \
             name(CONTROL_DIAGNOSTICS)
-        self._setpoints, self._path = name(SETPOINTS), name(REFERENCE_PATH)
+        self._setpoints, self._path, self._tf = name(SETPOINTS), name(REFERENCE_PATH), name(TF)
         self._truth = name(GROUND_TRUTH)
+        self._base_frame = base_frame(namespace)
         self._encode_clock = clock_encoder()
-        self._encode_odometry = odometry_encoder()
+        self._encode_odometry = odometry_encoder(ODOM_FRAME, self._base_frame)
+        self._encode_tf = tf_encoder([self._base_frame])
         self._encode_forces = rotor_forces_encoder()
-        self._encode_wrench = wrench_encoder(arm_length)
+        self._encode_wrench = wrench_encoder(arm_length, self._base_frame)
         self._encode_pose = pose_stamped_encoder()
         self._encode_diagnostics = diagnostics_encoder()
 
@@ -86,7 +90,8 @@ class FlightBag:
         kit = rosbags_kit()
         stamp = nanoseconds(path.start)
         if self._setpoints:
-            self.writer.write_message(self._setpoints, setpoints_msg(kit, path), stamp)
+            self.writer.write_message(self._setpoints, setpoints_msg(kit, path, child_frame_id=self._base_frame),
+                                      stamp)
         if self._path:
             self.writer.write_message(self._path, path_msg(kit, path), stamp)
 
@@ -106,6 +111,8 @@ class FlightBag:
             write(self._odom, self._encode_odometry(sec, nanosec, odometry), stamp)
         if self._truth and truth is not None:
             write(self._truth, self._encode_odometry(sec, nanosec, truth), stamp)
+        if self._tf:
+            write(self._tf, self._encode_tf(sec, nanosec, (odometry,)), stamp)
         if self._forces:
             write(self._forces, self._encode_forces(forces), stamp)
         if self._wrench:

@@ -15,7 +15,7 @@ from typing import Mapping, Sequence
 
 import yaml
 
-from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, QosSpec, TopicSpec, resolve
+from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, QosSpec, TopicSpec, resolve_all
 
 METADATA_FILE = 'metadata.yaml'
 BAG_VERSION = 9
@@ -63,21 +63,22 @@ def offered_qos_profiles(qos: QosSpec) -> list[dict]:
     }]
 
 
-def rosbag2_qos_overrides(namespace: str, topics: Sequence[TopicSpec] = RECORDED_TOPICS) -> str:
-    """YAML for ``ros2 bag record --qos-profile-overrides-path``: each topic with its contract QoS.
+def rosbag2_qos_overrides(namespaces: Sequence[str], topics: Sequence[TopicSpec] = RECORDED_TOPICS) -> str:
+    """YAML for ``ros2 bag record --qos-profile-overrides-path``: each topic of each vehicle with its contract QoS.
 
     rosbag2 subscribes with a history of 10 messages; at lockstep rates (about 2000 steps/s) its
     reader then drops some (seen here: 119 of 6000 odometry messages of one flight). With the
     contract's history depth (1000 per-step) it records every message.
     """
-    return _dump({resolve(topic, namespace): offered_qos_profiles(topic.qos)[0] for topic in topics})
+    return _dump({name: offered_qos_profiles(topic.qos)[0] for name, topic in resolve_all(topics, namespaces)})
 
 
 def qos_overrides_main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog='rosbag2-qos', description='Print the QoS overrides that let `ros2 bag record` keep up with a '
         'lockstep flight: ros2 bag record -s mcap --qos-profile-overrides-path FILE TOPIC ...')
-    parser.add_argument('--namespace', default=DEFAULT_NAMESPACE, help='vehicle namespace (default %(default)s)')
+    parser.add_argument('--namespace', nargs='+', default=[DEFAULT_NAMESPACE],
+                        help='vehicle namespace(s) (default %(default)s; a fleet: uav1 uav2 ...)')
     print(rosbag2_qos_overrides(parser.parse_args(argv).namespace), end='')
     return 0
 

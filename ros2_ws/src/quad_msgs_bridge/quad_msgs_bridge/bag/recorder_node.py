@@ -7,10 +7,11 @@ it takes what waits in rounds, ``/clock`` first, so log times never decrease), t
 the wall time the publisher sent it (DDS source timestamp), so a bag shows both the flight in sim
 time and the real message latencies.
 
-Per-step topics published by the controller must be discovered before ``odom`` is subscribed:
-a lockstep simulator that waits for the recorder's ``odom`` subscription then starts only when
-nothing of the flight can be missed. SIGINT/SIGTERM stop it cleanly: everything already received
-is drained and the bag is finalized.
+One recorder records a fleet: the contract topics of every vehicle of ``vehicles`` (namespaces
+relative to the node's, by default its own), ``/clock`` and ``/tf`` once. Per-step topics published
+by the controllers must be discovered before ``odom`` is subscribed: a lockstep simulator that waits
+for the recorder's ``odom`` subscriptions then starts only when nothing of the flight can be missed.
+SIGINT/SIGTERM stop it cleanly: everything already received is drained and the bag is finalized.
 """
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from quad_msgs_bridge.bag.writer import BagWriter
-from quad_msgs_bridge.contract import CLOCK, ODOM, RECORDED_TOPICS, TopicSpec, resolve
+from quad_msgs_bridge.contract import (CLOCK, ODOM, RECORDED_TOPICS, SIMULATOR_TOPICS, TopicSpec, resolve_all,
+                                       vehicle_namespaces)
 from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
 from quad_msgs_bridge.bag.flight_bag import flight_custom_data
 from quad_msgs_bridge.ros_helpers import declare, init_ros, qos_profile
@@ -38,7 +40,7 @@ class RecorderNode(Node):
     def __init__(self, kit: MessageKit):
         super().__init__('recorder')
         bag = declare(self, 'bag', '', 'bag directory to create (required)')
-        names = declare(self, 'topics', [t.name for t in RECORDED_TOPICS], 'contract topics to record')
+        topic_names = declare(self, 'topics', [t.name for t in RECORDED_TOPICS], 'contract topics to record')
         queue_size = declare(self, 'queue_size', 100000, 'messages buffered for the writer thread', (1, 10 ** 7))
         overwrite = declare(self, 'overwrite', False, 'replace an existing bag at the same path')
         labels = {key: declare(self, key, '', f'{key} stored in the bag metadata')
@@ -46,31 +48,44 @@ class RecorderNode(Node):
         seed = declare(self, 'seed', 0, 'NN seed of the flight, stored in the bag metadata', (0, 2 ** 31 - 1))
         settle_time = declare(self, 'settle_time', 5.0, 'metrics settling window stored in the bag [s]', (0.0, 1e6))
         vehicle_file = declare(self, 'vehicle_file', '', 'vehicle YAML of the flight; empty: the packaged one')
+        names = declare(self, 'vehicles', [''], "namespaces of the recorded vehicles, relative to the node's "
+                        "('': its own, the default; a leading / makes one absolute)")
         params, _ = load_vehicle_file(vehicle_file or None)
         if not bag:
             raise ParameterError('parameter bag: a bag directory is required')
         known = {t.name: t for t in RECORDED_TOPICS}
-        unknown = [n for n in names if n not in known]
+        unknown = [n for n in topic_names if n not in known]
         if unknown:
             raise ParameterError(f'parameter topics: {unknown} are not contract topics ({", ".join(known)})')
-        self.topics = [known[n] for n in names]
-        namespace = self.get_namespace()
-        custom = flight_custom_data(params, settle_time, backend='ros', seed=seed,
+        self.topics = [known[n] for n in topic_names if self.type_installed(kit, known[n])]
+        self.namespaces = vehicle_namespaces(self.get_namespace(), names)
+        vehicles = {'namespace': self.namespaces[0]} if len(self.namespaces) == 1 else \
+            {'vehicles': ','.join(self.namespaces)}
+        custom = flight_custom_data(params, settle_time, backend='ros', seed=seed, **vehicles,
                                     **{k: v for k, v in labels.items() if v})
-        self.writer = BagWriter(bag, self.topics, namespace, custom_data=custom, overwrite=overwrite,
+        self.writer = BagWriter(bag, self.topics, self.namespaces, custom_data=custom, overwrite=overwrite,
                                 queue_size=queue_size)
         self.kit = kit
         self.clock_ns: int | None = 0 if CLOCK in self.topics else None    #: sim time of the latest /clock [ns]
         self.received = 0
         self.recorded: list = []
-        for topic in self.topics:
+        for name, topic in resolve_all(self.topics, self.namespaces):
             if topic is not ODOM:
-                self.subscribe(topic)
+                self.subscribe(name, topic)
         self.gate = self.create_timer(0.02, self.open_gate) if ODOM in self.topics else None
-        self.get_logger().info(f'recording {len(self.topics)} topics of {namespace} into {bag}')
+        self.get_logger().info(f'recording {len(self.topics)} topics of {", ".join(self.namespaces)} into {bag}')
 
-    def subscribe(self, topic: TopicSpec) -> None:
-        name = resolve(topic, self.get_namespace())
+    def type_installed(self, kit: MessageKit, topic: TopicSpec) -> bool:
+        """Whether the message type of ``topic`` is installed (tf2_msgs may not be); if not, say so."""
+        try:
+            kit[topic.type]
+        except ImportError as error:
+            self.get_logger().warning(f'{topic.type} is not installed ({error}): {topic.name} is not recorded')
+            return False
+        return True
+
+    def subscribe(self, name: str, topic: TopicSpec) -> None:
+        """Record ``topic`` under its absolute ``name``."""
         qos = qos_profile(topic.qos)
         profile = QoSProfile(history=qos.history, depth=max(qos.depth, RECORD_DEPTH),
                              reliability=qos.reliability, durability=qos.durability)
@@ -89,7 +104,7 @@ class RecorderNode(Node):
             record(data, info)
             self.take_waiting()
 
-        subscription = self.create_subscription(self.kit[topic.type], topic.name, on_message, profile, raw=True)
+        subscription = self.create_subscription(self.kit[topic.type], name, on_message, profile, raw=True)
         self.recorded.append((topic, subscription, record))
         # /clock first, then odom: every message taken in a round is logged at the newest sim time
         self.recorded.sort(key=lambda entry: (entry[0] is not CLOCK, entry[0] is not ODOM))
@@ -106,13 +121,13 @@ class RecorderNode(Node):
                 record(*taken)
 
     def open_gate(self) -> None:
-        """Subscribe to odom once every recorded per-step topic has a discovered publisher."""
-        waiting = [t.name for t in self.topics
-                   if t.qos.durability == 'volatile' and t not in (ODOM, CLOCK) and self.count_publishers(t.name) == 0]
-        if waiting:
+        """Subscribe to every odom once every recorded per-step topic of the controllers has a discovered publisher."""
+        per_step = [t for t in self.topics if t.qos.durability == 'volatile' and t not in SIMULATOR_TOPICS]
+        if any(self.count_publishers(name) == 0 for name, _ in resolve_all(per_step, self.namespaces)):
             return
         self.gate.cancel()
-        self.subscribe(ODOM)
+        for name, _ in resolve_all([ODOM], self.namespaces):
+            self.subscribe(name, ODOM)
         self.get_logger().info('controller publishers discovered; recording odom')
 
 

@@ -26,7 +26,7 @@ from rosbags.typesys.store import Typestore
 
 from quad_msgs_bridge.bag.metadata import (CUSTOM_DATA_RECORD, METADATA_FILE, ROS_DISTRO, TopicEntry, bagfile_information,
                            channel_metadata, information_yaml, offered_qos_profiles, write_metadata)
-from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, TopicSpec, resolve
+from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, TopicSpec, resolve_all
 from quad_msgs_bridge.bag.mcap_file import DEFAULT_CHUNK_SIZE, BagWriteError, McapFileWriter
 
 _STOP = None
@@ -91,8 +91,11 @@ class BagWriter:
     """A rosbag2 bag (directory, ``metadata.yaml``, one MCAP file) being recorded."""
 
     def __init__(self, path: str | Path, topics: Sequence[TopicSpec] = RECORDED_TOPICS,
-                 namespace: str = DEFAULT_NAMESPACE, *, custom_data: Mapping[str, str] | None = None,
+                 namespace: str | Sequence[str] = DEFAULT_NAMESPACE, *,
+                 custom_data: Mapping[str, str] | None = None,
                  overwrite: bool = False, chunk_size: int = DEFAULT_CHUNK_SIZE, queue_size: int = 0):
+        """A bag of ``topics`` in ``namespace``, or in each of several (a fleet: one channel per vehicle
+        and topic, ``/clock`` and ``/tf`` once)."""
         self.path = Path(path)
         self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         self.typestore = jazzy_typestore()
@@ -105,10 +108,8 @@ class BagWriter:
         self._types: dict[str, str] = {}
         self._channels: dict[str, int] = {}
         schemas: dict[str, int] = {}
-        for spec in topics:
-            name = resolve(spec, namespace)
-            if name in self._channels:
-                continue
+        namespaces = [namespace] if isinstance(namespace, str) else namespace
+        for name, spec in resolve_all(topics, namespaces):
             entry = TopicEntry(name, spec.type, offered_qos_profiles(spec.qos), self.typestore.hash_rihs01(spec.type))
             if spec.type not in schemas:
                 msgdef, _ = self.typestore.generate_msgdef(spec.type, ros_version=2)
