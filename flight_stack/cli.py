@@ -70,8 +70,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help='ROS backend: namespace of the vehicle (default quad), or of a fleet\'s vehicles '
                              '(default: the root namespace)')
     parser.add_argument('--vehicles', type=int, default=1, metavar='N',
-                        help='ROS backend: fly N vehicles on one sim clock, uav1..uavN, each its own copy of the '
-                             'scenario shifted 3 m along y from the previous one')
+                        help='fly N vehicles on one sim clock, uav1..uavN, each its own copy of the scenario '
+                             'shifted 3 m along y from the previous one (ROS: one simulator, a controller and a '
+                             'trajectory node per vehicle; embedded: the fleet stepped as one batch)')
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                         help='ROS backend: lockstep (deterministic) or realtime simulation')
     parser.add_argument('--speed-factor', type=float, default=None,
@@ -226,6 +227,37 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
     return Flown(result.record, result.wall_time_s, flight, failure=result.failure)
 
 
+def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list[tuple[str, Flown]]:
+    """The embedded backend's fleet: every vehicle stepped together as one batch on one sim clock; per
+    vehicle (its namespace, its flight), reviewed from the records in memory (what the bag holds)."""
+    from flight_stack.closed_loop import FailureRules
+    from flight_stack.embedded import fly_fleet
+    from flight_stack.fleet import fleet_layout
+    from nnit2fsmc_controller.trajectory import make_scenario
+    from quad_msgs_bridge.bag.flight_bag import FleetBag, disturbances_label
+    from quad_msgs_bridge.review.flight_from_bag import BagFlight
+
+    vehicles = fleet_layout(args.vehicles, args.namespace)
+    trajectories = [make_scenario(plan.scenario, plan.duration, offset=vehicle.offset) for vehicle in vehicles]
+    with stop_signals() as stop:
+        recording = (FleetBag.create(bag, plan.params, plan.settle_time, [v.namespace for v in vehicles],
+                                     topics=plan.topics, controller=plan.controller, scenario=plan.scenario,
+                                     backend='embedded', seed=plan.seed,
+                                     disturbances=disturbances_label(plan.disturbances.enabled))
+                     if bag else contextlib.nullcontext())
+        with recording as written:
+            results = fly_fleet(plan.controller, trajectories, plan.params, plan.disturbances, plan.gains,
+                                plan.duration, plan.physics_rate, progress=not args.quiet, bag=written, stop=stop,
+                                rules=FailureRules(plan.settle_time, max_error=math.inf))
+    flights = []
+    for vehicle, result in zip(vehicles, results):
+        flight = (BagFlight(bag_shown, vehicle.namespace, result.record, plan.params, plan.settle_time,
+                            dict(written.writer.custom_data)) if bag else None)
+        flights.append((vehicle.namespace, Flown(result.record, result.wall_time_s, flight,
+                                                 {'offset_m': list(vehicle.offset)}, failure=result.failure)))
+    return flights
+
+
 def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str, Flown]]:
     """Every node in its own process; per vehicle (its namespace, its flight) read from the bag the recorder
     node wrote: one, or a fleet (flight_stack.fleet)."""
@@ -327,8 +359,8 @@ def run(argv: list[str]) -> int:
         check_number('--extra-subscribers', args.extra_subscribers, 0.0, 100.0)
         check_number('--vehicles', args.vehicles, 1, MAX_VEHICLES)
         backend = choose_backend(args.backend, args.live)
-        if backend == 'embedded' and args.vehicles > 1:
-            raise ParameterError('--vehicles: a fleet flies on the ROS backend (--backend ros)')
+        if args.live and args.vehicles > 1:
+            raise ParameterError('--live: the live view shows one vehicle; fly a fleet without --live')
         speed_factor = check_live_options(args, backend)
         if backend == 'ros':
             args.speed_factor = check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor,
@@ -411,6 +443,8 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
         if backend == 'ros':
             with tempfile.TemporaryDirectory(prefix='nnit2fsmc-') as scratch:   # --no-bag: the bag is read, then goes
                 flights = fly_on_ros(args, plan, output.bag or Path(scratch) / 'bag', bag_shown)
+        elif args.vehicles > 1:
+            flights = fly_fleet_here(args, plan, output.bag, bag_shown)
         else:
             flights = [(None, fly_here(plan, output.bag, bag_shown, not args.quiet, live_server, speed_factor,
                                        args.live_wait))]
@@ -421,7 +455,7 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
     except BagWriteError as error:
         return unfinished(output, f'error: {error}', 1)
     if len(flights) > 1:
-        return report_fleet(flights, plan, output, bag_shown)
+        return report_fleet(flights, plan, backend, output, bag_shown)
     [(_, flown)] = flights
     summary = summarize(flown, plan, backend)
     write_summary(summary, output.out)
@@ -439,17 +473,27 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
     return 0 if summary['flight_ok'] else 1
 
 
-def report_fleet(flights: list[tuple[str, Flown]], plan, output, bag_shown: Path | None) -> int:
-    """A fleet's summary (one row per vehicle, summary.json ``vehicles.<name>``), moved into place; the exit status."""
+def report_fleet(flights: list[tuple[str, Flown]], plan, backend: str, output, bag_shown: Path | None) -> int:
+    """A fleet's summary (one row per vehicle, summary.json ``vehicles.<name>``) and review (a column per
+    vehicle, every path in one 3-D figure), moved into place; the exit status."""
     from flight_stack.fleet import fleet_summary, format_fleet_summary
     from flight_stack.summary import write_summary
+    from quad_msgs_bridge.review.command import review_flights
 
-    fleet = fleet_summary({name: summarize(flown, plan, 'ros') for name, flown in flights})
+    fleet = fleet_summary({name: summarize(flown, plan, backend) for name, flown in flights})
     write_summary(fleet, output.out)
+    reviewed = [flown.flight for _, flown in flights if flown.flight is not None]
+    for flight, (name, _) in zip(reviewed, flights):
+        flight.label = name
+    review = review_flights(reviewed, output.out) if len(reviewed) == len(flights) else None
     output.commit()
     print(format_fleet_summary(fleet))
     print(f'summary: {output.out_dir / "summary.json"}')
     if bag_shown:
-        print(f'bag: {bag_shown} (every vehicle; review one: run_stack.py review {bag_shown} --namespace '
-              f'{flights[0][0]})')
+        print(f'bag: {bag_shown} (every vehicle; `run_stack.py review BAG` reviews them all, '
+              f'--namespace {flights[0][0]} one)')
+    if review is not None:
+        for note in review.notes:
+            print(f'note: {note}')
+        print(f'report: {output.out_dir / review.report.name}')
     return 0 if fleet['flight_ok'] else 1

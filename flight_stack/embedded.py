@@ -15,11 +15,13 @@ import time
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
+import numpy as np
+
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
 from quad_msgs_bridge.bag.flight_bag import FlightBag
 from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
-from quad_msgs_bridge.reference import SetpointPath
-from quad_msgs_bridge.state import PSI, odometry_from_state, state_from_odometry
+from quad_msgs_bridge.reference import ReferenceSample, SetpointPath
+from quad_msgs_bridge.state import PSI, OdometrySample, odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.model import QuadrotorModel
 from quad_sim.perturbations.actuation import MotorLag, TransportDelay
@@ -133,3 +135,85 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     failure = None if loop.flying else FAILURES[loop.failure]
     return FlightResult(recorder.record(), time.perf_counter() - started, len(recorder.rows), failure,
                         None if loop.flying else float(loop.failure_time))
+
+
+def _stacked(samples: Sequence[ReferenceSample]) -> ReferenceSample:
+    """One reference of a batch from one sample per vehicle (each field an array, one element per vehicle)."""
+    return ReferenceSample(*(tuple(np.array(values) for values in zip(*field_values))
+                             if isinstance(field_values[0], tuple) else np.array(field_values)
+                             for field_values in zip(*samples)))
+
+
+def _vehicle(values, k: int):
+    """Vehicle k's floats of a batch value: an array, a float shared by all, or a tuple, list or
+    OdometrySample of those."""
+    if isinstance(values, np.ndarray):
+        return float(values[k])
+    if isinstance(values, OdometrySample):
+        return OdometrySample(*(_vehicle(v, k) for v in values))
+    if isinstance(values, (tuple, list)):
+        return type(values)(_vehicle(v, k) for v in values)
+    return values
+
+
+def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParams, disturbances: Disturbances,
+              gains: dict, duration: float, physics_rate: float, setpoint_rate: float = 50.0,
+              progress: bool = False, bag=None, stop: Callable[[], bool] | None = None,
+              rules: FailureRules = FailureRules(settle_time=5.0, max_error=math.inf)) -> list[FlightResult]:
+    """Fly a fleet on one sim clock: vehicle k flies ``trajectories[k]`` (its own, e.g. offset, copy of
+    the scenario), all stepped together as one batch; one FlightResult per vehicle.
+
+    Each vehicle's controller reads its state through an odometry message of it and answers it with
+    the reference sampled from its own setpoint path, as its controller node does in a ROS fleet.
+    With ``bag`` (a FleetBag) every vehicle's topics are recorded in its namespace, ``/clock`` and
+    ``/tf`` once per step. A vehicle that breaks one of ``rules`` is frozen; the others fly on.
+    """
+    count = len(trajectories)
+    controller = build_controller(controller_kind, params, gains, batch=count)
+    published = [published_path(trajectory, setpoint_rate) for trajectory in trajectories]
+    paths = [setpoint_path(path) for path in published]
+    substeps = physics_substeps(controller.dt, physics_rate)
+    start = [np.array(values) for values in zip(*(trajectory.initial_state for trajectory in trajectories))]
+    simulator = Simulator(QuadrotorModel(params, disturbances), 1.0 / physics_rate, start)
+    loop = ClosedLoop(controller, simulator, lambda t: _stacked([path.sample(t) for path in paths]), substeps,
+                      rules, observe=through_odometry)
+    recorders = [FlightRecorder() for _ in trajectories]
+    steps = int(round(duration / controller.dt))
+    report_every = max(1, steps // 10)
+    started = time.perf_counter()
+    if bag is not None:
+        for vehicle_bag, path in zip(bag.vehicles, published):
+            vehicle_bag.record_setpoints(path)
+    with np.errstate(all='ignore'):          # a failing vehicle may overflow before it is frozen
+        for k in range(steps):
+            if stop is not None and stop():
+                raise KeyboardInterrupt(f'stopped after {k} control steps')
+            flying = loop.flying.copy()
+            done = loop.step()
+            out, reference, truth = done.output, done.reference, done.truth
+            axes = list(out.axes.values())
+            odometries = [_vehicle(done.observation, v) for v in range(count)]
+            if bag is not None:
+                bag.record_shared(odometries)
+            for v in range(count):
+                if not flying[v]:
+                    continue
+                forces, controls = _vehicle(out.forces, v), _vehicle(out.controls, v)
+                surfaces, equivalent, corrective = ([_vehicle(a.surface, v) for a in axes],
+                                                    [_vehicle(a.equivalent, v) for a in axes],
+                                                    [_vehicle(a.corrective, v) for a in axes])
+                position, yaw = _vehicle(reference.position, v), _vehicle(reference.yaw, v)
+                recorders[v].append(done.time, _vehicle(truth[:3], v), _vehicle(truth[PSI], v), position, yaw,
+                                    forces, controls, surfaces, equivalent, corrective)
+                if bag is not None:
+                    bag.vehicles[v].record_step(odometries[v], forces, controls, position, yaw, surfaces,
+                                                equivalent, corrective)
+            if not loop.flying.any():
+                break
+            if progress and (k + 1) % report_every == 0:
+                print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
+    wall = time.perf_counter() - started
+    return [FlightResult(recorder.record(), wall, len(recorder.rows),
+                         None if loop.failure[v] < 0 else FAILURES[loop.failure[v]],
+                         None if loop.failure[v] < 0 else float(loop.failure_time[v]))
+            for v, recorder in enumerate(recorders)]

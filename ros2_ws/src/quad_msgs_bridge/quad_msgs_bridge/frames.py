@@ -18,9 +18,10 @@ Quat = tuple[float, float, float, float]
 
 def quaternion_from_euler(phi: float, theta: float, psi: float) -> Quat:
     """Unit quaternion (x, y, z, w) of R = Rz(psi) Ry(theta) Rx(phi); angles [rad]."""
-    cr, sr = math.cos(phi / 2.0), math.sin(phi / 2.0)
-    cp, sp = math.cos(theta / 2.0), math.sin(theta / 2.0)
-    cy, sy = math.cos(psi / 2.0), math.sin(psi / 2.0)
+    xp = namespace_for(phi, theta, psi)
+    cr, sr = xp.cos(phi / 2.0), xp.sin(phi / 2.0)
+    cp, sp = xp.cos(theta / 2.0), xp.sin(theta / 2.0)
+    cy, sy = xp.cos(psi / 2.0), xp.sin(psi / 2.0)
     return (sr * cp * cy - cr * sp * sy,
             cr * sp * cy + sr * cp * sy,
             cr * cp * sy - sr * sp * cy,
@@ -30,21 +31,23 @@ def quaternion_from_euler(phi: float, theta: float, psi: float) -> Quat:
 def euler_from_quaternion(q: Quat) -> Vec3:
     """(phi, theta, psi) [rad] of a quaternion (x, y, z, w); normalised first, theta in [-pi/2, pi/2]."""
     x, y, z, w = q
-    norm = math.sqrt(x * x + y * y + z * z + w * w)
-    if not norm > 0.0 or not math.isfinite(norm):
-        raise ValueError(f'quaternion {q} has no orientation (norm {norm})')
+    xp = namespace_for(x, y, z, w)
+    norm = xp.sqrt(x * x + y * y + z * z + w * w)
+    if xp is SCALAR and (not norm > 0.0 or not math.isfinite(norm)):
+        raise ValueError(f'quaternion {q} has no orientation (norm {norm})')   # a batch gets NaN there
     x, y, z, w = x / norm, y / norm, z / norm, w / norm
-    phi = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    theta = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-    psi = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    phi = xp.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    theta = xp.asin(xp.clip(2.0 * (w * y - z * x), -1.0, 1.0))
+    psi = xp.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
     return phi, theta, psi
 
 
 def rotation_from_euler(phi: float, theta: float, psi: float) -> tuple[Vec3, Vec3, Vec3]:
     """Rows of the body-to-world rotation matrix R = Rz(psi) Ry(theta) Rx(phi)."""
-    cf, sf = math.cos(phi), math.sin(phi)
-    ct, st = math.cos(theta), math.sin(theta)
-    cs, ss = math.cos(psi), math.sin(psi)
+    xp = namespace_for(phi, theta, psi)
+    cf, sf = xp.cos(phi), xp.sin(phi)
+    ct, st = xp.cos(theta), xp.sin(theta)
+    cs, ss = xp.cos(psi), xp.sin(psi)
     return ((ct * cs, sf * st * cs - cf * ss, cf * st * cs + sf * ss),
             (ct * ss, sf * st * ss + cf * cs, cf * st * ss - sf * cs),
             (-st, sf * ct, cf * ct))

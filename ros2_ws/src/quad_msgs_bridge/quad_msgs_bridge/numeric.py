@@ -4,7 +4,7 @@ Equations are written once against a namespace ``xp``; :func:`namespace_for` pic
 plain-float one for a single vehicle and the numpy one when the values are arrays with one
 element per vehicle. Both namespaces offer the same primitives with the same meaning:
 
-* ``sin cos atan atan2 tanh hypot sqrt exp expm1 abs floor``: as in :mod:`math`, elementwise;
+* ``sin cos asin atan atan2 tanh hypot sqrt exp expm1 abs floor``: as in :mod:`math`, elementwise;
 * ``minimum(a, b)``, ``maximum(a, b)``, ``clip(v, low, high)``, ``where(condition, a, b)``;
 * ``sign(v)``: -1, 0 or +1; ``signed_square(v)``: v |v|;
 * ``zeros_like(v)``: zero(s) of v's shape; ``copy(v)``: an independent copy of v;
@@ -48,7 +48,7 @@ def _batch_all_finite(values) -> bool:
 
 
 SCALAR = SimpleNamespace(
-    sin=math.sin, cos=math.cos, atan=math.atan, atan2=math.atan2, tanh=math.tanh, hypot=math.hypot,
+    sin=math.sin, cos=math.cos, asin=math.asin, atan=math.atan, atan2=math.atan2, tanh=math.tanh, hypot=math.hypot,
     sqrt=math.sqrt, exp=math.exp, expm1=math.expm1, abs=abs, floor=math.floor, minimum=min, maximum=max,
     clip=_clip, where=_where, sign=_sign, signed_square=lambda v: v * abs(v),
     take=lambda table, index: table[int(index)],
@@ -56,7 +56,7 @@ SCALAR = SimpleNamespace(
     finite_each=lambda values: all(map(math.isfinite, values)), any=bool,
     zeros_like=lambda v: 0.0, copy=lambda v: v)
 BATCH = SimpleNamespace(
-    sin=np.sin, cos=np.cos, atan=np.arctan, atan2=np.arctan2, tanh=np.tanh, hypot=np.hypot,
+    sin=np.sin, cos=np.cos, asin=np.arcsin, atan=np.arctan, atan2=np.arctan2, tanh=np.tanh, hypot=np.hypot,
     sqrt=np.sqrt, exp=np.exp, expm1=np.expm1, abs=np.abs, floor=np.floor, minimum=np.minimum, maximum=np.maximum,
     clip=lambda v, low, high: np.minimum(np.maximum(v, low), high), where=np.where, sign=np.sign,
     signed_square=lambda v: v * np.abs(v),

@@ -52,15 +52,20 @@ def flight_custom_data(params: VehicleParams, settle_time: float, **info) -> dic
 
 
 class FlightBag:
-    """A bag fed by the embedded flight loop; a context manager that closes the bag."""
+    """A bag fed by the embedded flight loop; a context manager that closes the bag.
 
-    def __init__(self, writer: BagWriter, arm_length: float, namespace: str = DEFAULT_NAMESPACE):
+    With ``shared_topics`` false it writes one vehicle's topics only, not ``/clock`` and ``/tf``
+    (the fleet's :class:`FleetBag` writes those once per step for every vehicle).
+    """
+
+    def __init__(self, writer: BagWriter, arm_length: float, namespace: str = DEFAULT_NAMESPACE,
+                 shared_topics: bool = True):
         self.writer = writer
         recorded = set(writer.topic_names())
 
         def name(spec: TopicSpec) -> str | None:
             topic = resolve(spec, namespace)
-            return topic if topic in recorded else None
+            return topic if topic in recorded and (shared_topics or spec not in (CLOCK, TF)) else None
 
         self._clock, self._odom, self._forces = name(CLOCK), name(ODOM), name(ROTOR_FORCES)
         self._wrench, self._reference, self._diagnostics = name(CONTROL_WRENCH), name(CONTROL_REFERENCE), \
@@ -126,6 +131,48 @@ class FlightBag:
         self.writer.close()
 
     def __enter__(self) -> 'FlightBag':
+        return self
+
+    def __exit__(self, exc_type, exc, traceback) -> None:
+        self.writer.__exit__(exc_type, exc, traceback)
+
+
+class FleetBag:
+    """The bag of a fleet flown by the embedded loop: every vehicle's topics in its namespace, and
+    ``/clock`` and one ``/tf`` (a transform per vehicle) once per step, as the fleet simulator
+    publishes them. ``vehicles[k]`` records vehicle k's own topics; a context manager that closes the bag.
+    """
+
+    def __init__(self, writer: BagWriter, arm_length: float, namespaces: Sequence[str]):
+        self.writer = writer
+        self.vehicles = [FlightBag(writer, arm_length, namespace, shared_topics=False) for namespace in namespaces]
+        recorded = set(writer.topic_names())
+        self._clock = resolve(CLOCK, '') if resolve(CLOCK, '') in recorded else None
+        self._tf = resolve(TF, '') if resolve(TF, '') in recorded else None
+        self._encode_clock = clock_encoder()
+        self._encode_tf = tf_encoder([base_frame(namespace) for namespace in namespaces])
+
+    @classmethod
+    def create(cls, path: str | Path, params: VehicleParams, settle_time: float, namespaces: Sequence[str], *,
+               topics: Sequence[TopicSpec] = RECORDED_TOPICS, overwrite: bool = False, **info) -> 'FleetBag':
+        """A new bag at ``path`` for a fleet of ``namespaces`` flying the vehicle ``params``."""
+        custom_data = flight_custom_data(params, settle_time, vehicles=','.join(namespaces), **info)
+        writer = BagWriter(path, topics, list(namespaces), custom_data=custom_data, overwrite=overwrite)
+        return cls(writer, params.d, namespaces)
+
+    def record_shared(self, odometries: Sequence[OdometrySample]) -> None:
+        """``/clock`` and ``/tf`` of a step, from every vehicle's odometry (all of one stamp)."""
+        stamp = nanoseconds(odometries[0].stamp)
+        sec, nanosec = divmod(stamp, NANOSECONDS_PER_SECOND)
+        if self._clock:
+            self.writer.write_serialized(self._clock, self._encode_clock(sec, nanosec), stamp)
+        if self._tf:
+            self.writer.write_serialized(self._tf, self._encode_tf(sec, nanosec, odometries), stamp)
+
+    def close(self) -> None:
+        self.writer.close()
+
+    def __enter__(self) -> 'FleetBag':
         return self
 
     def __exit__(self, exc_type, exc, traceback) -> None:

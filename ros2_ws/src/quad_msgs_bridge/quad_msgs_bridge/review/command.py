@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
-from quad_msgs_bridge.review.flight_from_bag import BagFlight, read_flight
+from quad_msgs_bridge.review.flight_from_bag import BagFlight, fleet_namespaces, read_flight
 from quad_msgs_bridge.review.plots import plot_flights
 from quad_msgs_bridge.review.report import text_table, write_html, write_markdown
 
@@ -44,9 +44,19 @@ def _unique_labels(flights: Sequence[BagFlight]) -> list[str]:
 def review_bags(bags: Sequence[str | Path], out_dir: str | Path, *, namespace: str | None = None,
                 vehicle_file: str | Path | None = None, settle_time: float | None = None,
                 plots: bool = True) -> Review:
-    """Metrics, plots and report of ``bags`` (several: compared) into ``out_dir``."""
-    flights = [read_flight(bag, namespace=namespace, vehicle_file=vehicle_file, settle_time=settle_time)
-               for bag in bags]
+    """Metrics, plots and report of ``bags`` (several: compared) into ``out_dir``.
+
+    The bag of a fleet (custom data ``vehicles``) gives one flight per vehicle, labelled by its
+    namespace, unless ``namespace`` picks one.
+    """
+    flights = []
+    for bag in bags:
+        vehicles = fleet_namespaces(bag) if namespace is None else []
+        for vehicle in vehicles or [namespace]:
+            flight = read_flight(bag, namespace=vehicle, vehicle_file=vehicle_file, settle_time=settle_time)
+            if vehicles:
+                flight.label = vehicle
+            flights.append(flight)
     return review_flights(flights, out_dir, plots=plots)
 
 

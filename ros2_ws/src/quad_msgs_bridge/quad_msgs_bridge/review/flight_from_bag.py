@@ -158,6 +158,13 @@ def _flight_record(topics: _Topics, warnings: list) -> FlightRecord | None:
     return recorder.record() if recorder.rows else None
 
 
+def fleet_namespaces(bag: str | Path) -> list[str]:
+    """The vehicles' namespaces of a fleet's bag (custom data ``vehicles``); [] for one vehicle's bag."""
+    check_bag_path(Path(bag))
+    listed = read_custom_data(Path(bag)).get('vehicles', '')
+    return [name for name in listed.split(',') if name]
+
+
 def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: str | Path | None = None,
                 settle_time: float | None = None) -> BagFlight:
     """The flight recorded in ``bag``; raises BagReadError if it lacks what a flight record needs.
