@@ -236,6 +236,14 @@ def test_a_lockstep_fleet_flies_each_vehicle_exactly_as_it_flies_alone(tmp_path)
         assert [transforms[k] for transforms in fleet_tf] == solo_tf, vehicle
         assert solo_tf[0].child_frame_id == f'fleet_eq/uav{k + 1}/base_link'
     assert fleet_payloads['/clock'] == solo['/clock']
+    # and the embedded fleet (one batch of three on one clock) flies the same to 1e-9
+    from flight_stack.embedded import fly_fleet
+    embedded = fly_fleet('nnit2fsmc', [make_scenario('paper', duration, v.offset) for v in vehicles], params,
+                         disturbances, load_gains(), duration, 1000.0)
+    for vehicle, flown in zip(vehicles, embedded):
+        name = vehicle.namespace.removeprefix('fleet_eq/')
+        ros_positions = np.array([decode_odometry(data).position for data in fleet_payloads[f'{name}/odom']])
+        assert np.abs(ros_positions - flown.record.position).max() <= 1e-9, vehicle
     last = [transform.transform.translation for transform in fleet_tf[-1]]
     assert [round(t.y - last[0].y, 6) for t in last] == [0.0, 3.0, 6.0]   # three copies, 3 m apart along y
 
