@@ -111,6 +111,7 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     started = time.perf_counter()
+    slopes = controller.surface_slopes()   # the gains do not change during an embedded flight
     step_sinks = ([bag] if bag is not None else []) + list(sinks)
     for sink in step_sinks:
         sink.record_setpoints(published)
@@ -127,7 +128,7 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
         truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
         for sink in step_sinks:
             sink.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
-                             surfaces, equivalent, corrective, truth=truth_odometry)
+                             surfaces, equivalent, corrective, slopes, truth=truth_odometry)
         if not loop.flying:
             break
         if progress and (k + 1) % report_every == 0:
@@ -177,6 +178,7 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
     simulator = Simulator(QuadrotorModel(params, disturbances), 1.0 / physics_rate, start)
     loop = ClosedLoop(controller, simulator, lambda t: _stacked([path.sample(t) for path in paths]), substeps,
                       rules, observe=through_odometry)
+    slopes = controller.surface_slopes()
     recorders = [FlightRecorder() for _ in trajectories]
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
@@ -207,7 +209,7 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
                                     forces, controls, surfaces, equivalent, corrective)
                 if bag is not None:
                     bag.vehicles[v].record_step(odometries[v], forces, controls, position, yaw, surfaces,
-                                                equivalent, corrective)
+                                                equivalent, corrective, slopes)
             if not loop.flying.any():
                 break
             if progress and (k + 1) % report_every == 0:

@@ -315,13 +315,13 @@ class LiveView:
 
     def record_step(self, odometry: OdometrySample, forces: Sequence[float], controls: Sequence[float],
                     reference_position: Sequence[float], reference_yaw: float, surfaces: Sequence[float],
-                    equivalent: Sequence[float], corrective: Sequence[float],
+                    equivalent: Sequence[float], corrective: Sequence[float], slopes: Sequence[float],
                     truth: OdometrySample | None = None) -> None:
         """The arguments of :meth:`FlightBag.record_step` (same units); the scene shows the true pose."""
         self.server.send_latched()
         if self.server.subscribed():       # nobody listening: no message to make
             self._contract.record_step(odometry, forces, controls, reference_position, reference_yaw,
-                                       surfaces, equivalent, corrective, truth=truth)
+                                       surfaces, equivalent, corrective, slopes, truth=truth)
         pose = truth or odometry
         self._scene.add_path_point(pose.stamp, pose.position)
         self._last = (nanoseconds(pose.stamp), pose, forces, reference_position)

@@ -6,8 +6,8 @@ import pytest
 
 from quad_msgs_bridge import fast_cdr
 from quad_msgs_bridge.bag.writer import jazzy_typestore
-from quad_msgs_bridge.conversions import (clock_msg, diagnostics_msg, odometry_msg, pose_stamped_msg, rosbags_kit,
-                                          rotor_forces_msg, tf_msg, wrench_msg)
+from quad_msgs_bridge.conversions import (clock_msg, diagnostics_from_msg, diagnostics_msg, odometry_msg,
+                                          pose_stamped_msg, rosbags_kit, rotor_forces_msg, tf_msg, wrench_msg)
 from quad_msgs_bridge.frames import quaternion_from_euler
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.timebase import stamp_fields
@@ -54,10 +54,19 @@ def test_rotor_forces(seed):
 
 @pytest.mark.parametrize('seed', range(5))
 def test_diagnostics(seed):
-    v = random_values(seed, 18)
-    surfaces, equivalent, corrective = v[0:6], v[6:12], v[12:18]
-    assert (fast_cdr.diagnostics_encoder()(surfaces, equivalent, corrective)
-            == serialized(diagnostics_msg(KIT, surfaces, equivalent, corrective), 'std_msgs/msg/Float64MultiArray'))
+    v = random_values(seed, 24)
+    surfaces, equivalent, corrective, slopes = v[0:6], v[6:12], v[12:18], v[18:24]
+    assert (fast_cdr.diagnostics_encoder()(surfaces, equivalent, corrective, slopes)
+            == serialized(diagnostics_msg(KIT, surfaces, equivalent, corrective, slopes),
+                          'std_msgs/msg/Float64MultiArray'))
+
+
+def test_diagnostics_of_a_bag_recorded_before_the_lambda_column_still_decode():
+    """6 x 3 diagnostics (surface, NN, fuzzy) of older bags: the three columns back, slopes None."""
+    v = random_values(7, 18)
+    msg = KIT['std_msgs/msg/Float64MultiArray'](
+        layout=KIT['std_msgs/msg/MultiArrayLayout'](dim=[], data_offset=0), data=np.array(v))
+    assert diagnostics_from_msg(msg) == (v[0::3], v[1::3], v[2::3], None)
 
 
 @pytest.mark.parametrize('seed', range(5))

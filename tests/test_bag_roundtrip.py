@@ -13,6 +13,8 @@ from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
 
 from bag_support import PARAMS, fly_recorded
+from nnit2fsmc_controller.controller import AXES
+from nnit2fsmc_controller.factory import load_gains
 from quad_msgs_bridge.bag.reader import mcap_file
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM,
@@ -81,8 +83,10 @@ def test_values_read_back_by_rosbags_equal_what_was_published(flight):
     assert decoded[name(SETPOINTS)][0][1] == TYPESTORE.serialize_cdr(
         setpoints_msg(kit, path, child_frame_id='quad/base_link'), SETPOINTS.type)
     assert decoded[name(REFERENCE_PATH)][0][1] == TYPESTORE.serialize_cdr(path_msg(kit, path), REFERENCE_PATH.type)
-    for k, (odometry, forces, controls, position, yaw, surfaces, equivalent, corrective) in \
+    slopes = tuple(load_gains()['common']['lambda'][axis] for axis in AXES)
+    for k, (odometry, forces, controls, position, yaw, surfaces, equivalent, corrective, recorded_slopes) in \
             enumerate(flight.published.steps):
+        assert tuple(recorded_slopes) == slopes
         assert odometry_from_msg(decoded[name(ODOM)][k][0]) == odometry
         clock = decoded[name(CLOCK)][k][0].clock
         assert (clock.sec, clock.nanosec) == stamp_fields(odometry.stamp)
@@ -96,7 +100,8 @@ def test_values_read_back_by_rosbags_equal_what_was_published(flight):
         assert (pose.position.x, pose.position.y, pose.position.z) == tuple(position)
         assert ((pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w)
                 == quaternion_from_euler(0.0, 0.0, yaw))
-        assert diagnostics_from_msg(decoded[name(CONTROL_DIAGNOSTICS)][k][0]) == (surfaces, equivalent, corrective)
+        assert diagnostics_from_msg(decoded[name(CONTROL_DIAGNOSTICS)][k][0]) == (surfaces, equivalent, corrective,
+                                                                                   list(slopes))
 
 
 def test_tf_carries_odom_to_the_namespaced_base_link_at_every_odometry_stamp(flight):

@@ -120,14 +120,15 @@ def write_foreign_bag(flight, path: Path, namespace: str) -> None:
     with writer:
         topics = (CLOCK, ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS)
         connections = {t: writer.add_connection(resolve(t, namespace), t.type, typestore=typestore) for t in topics}
-        for odometry, forces, controls, position, yaw, surfaces, equivalent, corrective in flight.published.steps:
+        for odometry, forces, controls, position, yaw, surfaces, equivalent, corrective, slopes \
+                in flight.published.steps:
             t = odometry.stamp
             stamp = round(t * 1e9) + 123   # a receive time: a little after the stamp
             messages = {CLOCK: clock_msg(kit, t),
                         ODOM: odometry_msg(kit, odometry), ROTOR_FORCES: rotor_forces_msg(kit, forces),
                         CONTROL_WRENCH: wrench_msg(kit, t, controls, PARAMS.d),
                         CONTROL_REFERENCE: pose_stamped_msg(kit, t, position, yaw),
-                        CONTROL_DIAGNOSTICS: diagnostics_msg(kit, surfaces, equivalent, corrective)}
+                        CONTROL_DIAGNOSTICS: diagnostics_msg(kit, surfaces, equivalent, corrective, slopes)}
             for topic, msg in messages.items():
                 writer.write(connections[topic], stamp, typestore.serialize_cdr(msg, topic.type))
 

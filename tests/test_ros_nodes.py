@@ -420,6 +420,79 @@ def test_goal_pose_is_flown_to_and_held(ros_node):
     assert math.dist(at_goal_time.position, (0.0, 0.0, 1.0)) < 0.05   # it was hovering before the goal
 
 
+def set_parameter(node, namespace: str, name: str, value: float):
+    """``ros2 param set`` as a service call: the controller's SetParametersResult for ``name`` := ``value``."""
+    from rcl_interfaces.srv import SetParameters
+    from rclpy.parameter import Parameter
+    client = node.create_client(SetParameters, f'/{namespace}/nnit2fsmc_controller/set_parameters')
+    assert client.wait_for_service(timeout_sec=30.0), 'no set_parameters service'
+    future = client.call_async(SetParameters.Request(
+        parameters=[Parameter(name, Parameter.Type.DOUBLE, value).to_parameter_msg()]))
+    assert spin_until(node, future.done, timeout=30.0), f'no answer to setting {name}'
+    node.destroy_client(client)
+    return future.result().results[0]
+
+
+def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_keeps_the_network(ros_node):
+    """Live tuning over real topics: refused sets say why, an accepted lambda_z defines S_z from the next update
+    (S_z = vz + lambda_z (z - z_d) on a hover, checked against the odometry), diagnostics carry the new lambda,
+    and the z network goes on from its learned weights."""
+    from quad_msgs_bridge.conversions import diagnostics_from_msg
+    namespace = 'live_tuning'
+    kit = rclpy_kit()
+    odometry, wrench_stamps, diagnostics = {}, [], []
+    ros_node.create_subscription(kit[ODOM.type], resolve(ODOM, namespace),
+                                 lambda msg: odometry.__setitem__(round(odometry_from_msg(msg).stamp * 1e9),
+                                                                  odometry_from_msg(msg)), qos_profile(ODOM.qos))
+    ros_node.create_subscription(kit[CONTROL_WRENCH.type], resolve(CONTROL_WRENCH, namespace),
+                                 lambda msg: wrench_stamps.append(msg.header.stamp.sec * 10 ** 9
+                                                                  + msg.header.stamp.nanosec),
+                                 qos_profile(CONTROL_WRENCH.qos))
+    ros_node.create_subscription(kit[CONTROL_DIAGNOSTICS.type], resolve(CONTROL_DIAGNOSTICS, namespace),
+                                 lambda msg: diagnostics.append(diagnostics_from_msg(msg)),
+                                 qos_profile(CONTROL_DIAGNOSTICS.qos))
+    start = [0.0, 0.0, 0.5] + [0.0] * 9          # at rest 0.5 m below the hover point: S_z far from 0
+    processes = [
+        node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
+                     {'scenario': 'hover', 'start_time': 0.0, 'use_sim_time': True}),
+        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {'use_sim_time': True}),
+        node_process('sim', 'quad_sim.sim_node', namespace,
+                     {'duration': 3.0, 'initial_state': start, 'wait_for_subscribers': 2}),
+    ]
+    try:
+        assert spin_until(ros_node, lambda: odometry and max(odometry) >= 1.0e9, timeout=120.0), 'no flight'
+        negative = set_parameter(ros_node, namespace, 'common.lambda.z', -1.0)
+        zero = set_parameter(ros_node, namespace, 'common.lambda.z', 0.0)
+        rate = set_parameter(ros_node, namespace, 'common.control_rate', 500.0)
+        set_at = max(odometry)
+        accepted = set_parameter(ros_node, namespace, 'common.lambda.z', 8.0)
+        assert spin_until(ros_node, lambda: max(odometry) >= 2.999e9, timeout=120.0), 'the flight never ended'
+        spin_until(ros_node, lambda: False, timeout=1.0)        # the last answers
+    finally:
+        codes = stop_all(processes)
+    assert all(code == 0 for code in codes.values()), codes
+    assert not negative.successful and negative.reason                       # out of the declared range
+    assert not zero.successful and 'lambda' in zero.reason                   # refused by the controller's check
+    assert not rate.successful and 'read-only' in rate.reason.lower()        # needs a restart
+    assert accepted.successful, accepted.reason
+    count = min(len(wrench_stamps), len(diagnostics))
+    steps = list(zip(wrench_stamps[-count:], diagnostics[-count:]))          # paired by order, as the contract says
+    assert count > 2000
+    lambdas = [slopes[2] for _, (_, _, _, slopes) in steps]
+    switch = next(k for k, value in enumerate(lambdas) if value != 3.0)
+    assert set(lambdas[:switch]) == {3.0} and set(lambdas[switch:]) == {8.0}
+    switched_at = steps[switch][0]
+    assert set_at <= switched_at <= set_at + 0.5e9     # from the next update after the set (lockstep goes on)
+    for stamp, (surfaces, equivalent, _, slopes) in steps:
+        state = state_from_odometry(odometry[stamp])
+        assert slopes[:2] + slopes[3:] == [3.0, 3.0, 12.0, 12.0, 4.0]
+        assert surfaces[2] == pytest.approx(state[5] + slopes[2] * (state[2] - 1.0), rel=1e-9, abs=1e-12)
+    z_error = state_from_odometry(odometry[switched_at])[2] - 1.0
+    assert abs(z_error) > 1e-3          # the two slopes give different surfaces here: the check discriminates
+    first, before, after = steps[0][1][1][2], steps[switch - 1][1][1][2], steps[switch][1][1][2]
+    assert abs(after - before) < 1e-2 < abs(after - first)     # the z network went on from what it had learned
+
+
 @pytest.mark.parametrize('module, params, name', [
     ('quad_sim.sim_node', {'physics_rate': -5.0}, 'physics_rate'),
     ('quad_sim.sim_node', {'mode': 'warp'}, 'mode'),

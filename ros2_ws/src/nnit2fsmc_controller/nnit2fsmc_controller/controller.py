@@ -157,6 +157,10 @@ class CascadedController:
         for law in self.laws.values():
             law.adapt()
 
+    def surface_slopes(self) -> tuple[float, ...]:
+        """The sliding-surface slopes lambda [1/s] of the subsystems, in AXES order (``control/diagnostics``)."""
+        return tuple(self.laws[axis].lam for axis in AXES)
+
     def attitude_from_accelerations(self, ax, ay, psi):
         """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi.
 

@@ -6,6 +6,13 @@ publishes ``rotor_forces`` first (the simulator can go on integrating), then ``c
 ``control/reference`` and ``control/diagnostics``, all stamped t, and only then takes the NN's
 learning step of that update (the forces do not depend on it).
 
+Live tuning: every gain of the gains file is a parameter (``common.lambda.z``, ...). A change with
+``ros2 param set`` is checked against the parameter's declared range, then validated by building
+the controller anew with it (:func:`nnit2fsmc_controller.tuning.retune`); a refused change answers
+with the reason, an accepted one is logged and applies from the next control update, the network
+weights, filters and integrators carried over. ``control/diagnostics`` carries the surface slopes
+lambda in effect at each update. Gains that need a restart (and the node parameters) are read-only.
+
 Failure behaviour: odometry that arrives before any setpoint is held and answered when the first
 setpoints arrive; a repeated odometry (the stamp last answered) is ignored; an older stamp means
 the simulator restarted, and the controller starts afresh (NN weights, filters) and answers it;
@@ -17,6 +24,7 @@ from __future__ import annotations
 import math
 import time
 
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 
@@ -32,7 +40,9 @@ from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.timebase import nanoseconds, seconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
-from .factory import CONTROLLERS, build_controller, flatten_gains, gain_description, load_gains, unflatten_gains
+from .factory import (CONTROLLERS, build_controller, flatten_gains, gain_choices, gain_description, load_gains,
+                      unflatten_gains)
+from .tuning import restart_reason, retune
 from .trajectory import Waypoints
 
 _UNBOUNDED = (0.0, math.inf)
@@ -42,28 +52,34 @@ class ControllerNode(Node):
     def __init__(self, kit: MessageKit):
         super().__init__('nnit2fsmc_controller')
         self.kit = kit
-        kind = declare(self, 'controller', 'nnit2fsmc', 'control law', choices=CONTROLLERS)
-        vehicle_file = declare(self, 'vehicle_file', '', 'vehicle YAML (nominal model); empty: the packaged one')
-        gains_file = declare(self, 'gains_file', '', 'gains YAML used as defaults; empty: the packaged one')
+        restart = 'read when the node starts'
+        kind = declare(self, 'controller', 'nnit2fsmc', 'control law', choices=CONTROLLERS, read_only=restart)
+        vehicle_file = declare(self, 'vehicle_file', '', 'vehicle YAML (nominal model); empty: the packaged one',
+                               read_only=restart)
+        gains_file = declare(self, 'gains_file', '', 'gains YAML used as defaults; empty: the packaged one',
+                             read_only=restart)
         self.goal_speed = declare(self, 'goal_speed', 0.5, 'mean speed of the transfer to a goal_pose [m/s]',
                                   (0.01, 10.0))
         self.odom_timeout = declare(self, 'odom_timeout', 0.5, 'wall seconds without odometry before warning',
-                                    (0.001, 60.0))
+                                    (0.001, 60.0), read_only=restart)
         latest_only = declare(self, 'latest_only', False,
-                              'answer only the newest odometry (realtime); false: answer every one in order (lockstep)')
+                              'answer only the newest odometry (realtime); false: answer every one in order (lockstep)',
+                              read_only=restart)
         self.params, _ = load_vehicle_file(vehicle_file or None)
-        gains = {}
+        self.flat_gains = {}
         for name, default in flatten_gains(load_gains(gains_file or None)).items():
             if isinstance(default, str):
-                gains[name] = declare(self, name, default, gain_description(name), choices=('km', 'nie-tan'))
+                bounds, choices = None, gain_choices(name)
             else:
-                gains[name] = declare(self, name, default, gain_description(name),
-                                      (0, 2 ** 31 - 1) if isinstance(default, int) else _UNBOUNDED)
-        self.kind, self.gains = kind, unflatten_gains(gains)
+                bounds, choices = (0, 2 ** 31 - 1) if isinstance(default, int) else _UNBOUNDED, None
+            self.flat_gains[name] = declare(self, name, default, gain_description(name), bounds, choices,
+                                            read_only=restart_reason(name))
+        self.kind, self.gains = kind, unflatten_gains(self.flat_gains)
         try:
             self.controller = build_controller(kind, self.params, self.gains)
         except (ParameterError, ValueError) as error:
             raise ParameterError(f'controller gains: {error}') from error
+        self.add_on_set_parameters_callback(self.on_set_parameters)
         self.forces_pub = publisher(self, kit, ROTOR_FORCES)
         self.wrench_pub = publisher(self, kit, CONTROL_WRENCH)
         self.reference_pub = publisher(self, kit, CONTROL_REFERENCE)
@@ -136,8 +152,28 @@ class ControllerNode(Node):
         self.wrench_pub.publish(self.encode_wrench(sec, nanosec, out.controls))
         self.reference_pub.publish(self.encode_reference(sec, nanosec, reference.position, reference.yaw))
         self.diagnostics_pub.publish(self.encode_diagnostics(
-            [a.surface for a in axes], [a.equivalent for a in axes], [a.corrective for a in axes]))
+            [a.surface for a in axes], [a.equivalent for a in axes], [a.corrective for a in axes],
+            self.controller.surface_slopes()))
         self.controller.adapt()   # learn while the simulator integrates, not when the next odometry waits
+
+    def on_set_parameters(self, parameters) -> SetParametersResult:
+        """Gains changed in flight (ros2 param set): validated by a retune, applied from the next update."""
+        changes = {p.name: p.value for p in parameters if p.name in self.flat_gains}
+        goal_speed = next((p.value for p in parameters if p.name == 'goal_speed'), None)
+        if changes:
+            flat = {**self.flat_gains, **changes}
+            try:
+                tuned = retune(self.controller, unflatten_gains(flat))
+            except (ParameterError, ValueError) as error:
+                self.get_logger().warning(f'refused gains {changes}: {error}')
+                return SetParametersResult(successful=False, reason=str(error))
+            said = ', '.join(f'{name} {self.flat_gains[name]} -> {value}' for name, value in changes.items())
+            self.controller, self.flat_gains, self.gains = tuned, flat, unflatten_gains(flat)
+            self.get_logger().info(f'gains changed in flight: {said}; applied from the next control update '
+                                   f'(after t={seconds(max(self.last_answered_ns, 0)):.3f} s), learned state kept')
+        if goal_speed is not None:
+            self.goal_speed = goal_speed
+        return SetParametersResult(successful=True)
 
     def restart(self, stamp_ns: int) -> None:
         """Sim time went back (a restarted or reset simulator): a new flight gets a fresh controller."""

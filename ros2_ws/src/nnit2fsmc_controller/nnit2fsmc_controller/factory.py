@@ -10,7 +10,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check
 
 from .axis_laws import NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
 from .controller import AXES, CascadedController
-from .it2_fuzzy import IT2FuzzyCorrector
+from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector
 from .neural_network import EquivalentControlNetwork
 
 DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controller.yaml'
@@ -167,6 +167,17 @@ GAIN_DESCRIPTIONS = {
     'kp': 'PID proportional gain', 'ki': 'PID integral gain', 'kd': 'PID derivative gain',
     'integral_limit': 'PID integral clamp [units of e * s]',
 }
+
+
+#: the valid values of each string gain, by the last component of its name
+GAIN_CHOICES = {
+    'type_reducer': TYPE_REDUCERS,
+}
+
+
+def gain_choices(name: str) -> tuple[str, ...]:
+    """Valid values of the string gain ``name`` (flattened, e.g. 'nnit2fsmc.type_reducer')."""
+    return GAIN_CHOICES[name.split('.')[-1]]
 
 
 def gain_description(name: str) -> str:

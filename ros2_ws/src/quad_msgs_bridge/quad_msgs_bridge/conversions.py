@@ -22,10 +22,10 @@ from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.timebase import stamp_fields, stamp_seconds
 
 SUBSYSTEM_NAMES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
-DIAGNOSTIC_QUANTITIES = ('surface', 'nn_equivalent', 'fuzzy_corrective')
+DIAGNOSTIC_QUANTITIES = ('surface', 'nn_equivalent', 'fuzzy_corrective', 'lambda')
 ROTOR_FORCES_LABEL = 'rotor_thrust_N:' + ','.join(ROTOR_NAMES)
 ROTOR_FORCES_DIMS = ((ROTOR_FORCES_LABEL, 4),)
-DIAGNOSTICS_DIMS = (('subsystem:' + ','.join(SUBSYSTEM_NAMES), 6), ('quantity:' + ','.join(DIAGNOSTIC_QUANTITIES), 3))
+DIAGNOSTICS_DIMS = (('subsystem:' + ','.join(SUBSYSTEM_NAMES), 6), ('quantity:' + ','.join(DIAGNOSTIC_QUANTITIES), 4))
 
 
 class MessageKit:
@@ -207,16 +207,24 @@ def controls_from_wrench(msg, arm_length: float) -> tuple[float, float, float, f
 
 
 def diagnostics_msg(kit: MessageKit, surfaces: Sequence[float], equivalent: Sequence[float],
-                    corrective: Sequence[float]):
-    """std_msgs/Float64MultiArray, 6 subsystems x (S, NN term, fuzzy term), row-major, labelled layout."""
-    data = [float(v) for row in zip(surfaces, equivalent, corrective) for v in row]
+                    corrective: Sequence[float], slopes: Sequence[float]):
+    """std_msgs/Float64MultiArray, 6 subsystems x (S, NN term, fuzzy term, lambda), row-major, labelled layout.
+
+    ``slopes`` are the sliding-surface slopes lambda [1/s] in effect at this update (they change
+    when the gains are tuned in flight).
+    """
+    data = [float(v) for row in zip(surfaces, equivalent, corrective, slopes) for v in row]
     return _multi_array_msg(kit, DIAGNOSTICS_DIMS, data)
 
 
-def diagnostics_from_msg(msg) -> tuple[list[float], list[float], list[float]]:
-    """(surfaces, equivalent terms, corrective terms), one value per subsystem."""
-    data = _multi_array_data(msg, 18, 'control/diagnostics')
-    return data[0::3], data[1::3], data[2::3]
+def diagnostics_from_msg(msg) -> tuple[list[float], list[float], list[float], list[float] | None]:
+    """(surfaces, equivalent terms, corrective terms, slopes lambda), one value per subsystem.
+
+    Diagnostics recorded before the lambda column existed (6 x 3) give slopes None.
+    """
+    width = 3 if len(msg.data) == 18 else len(DIAGNOSTIC_QUANTITIES)
+    data = _multi_array_data(msg, 6 * width, 'control/diagnostics')
+    return data[0::width], data[1::width], data[2::width], (data[3::width] if width == 4 else None)
 
 
 def pose_stamped_msg(kit: MessageKit, t: float, position: Sequence[float], yaw: float,

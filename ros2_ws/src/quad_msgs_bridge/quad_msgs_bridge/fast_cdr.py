@@ -148,14 +148,15 @@ def rotor_forces_encoder() -> Callable[[Sequence[float]], bytes]:
     return encode
 
 
-def diagnostics_encoder() -> Callable[[Sequence[float], Sequence[float], Sequence[float]], bytes]:
-    """encode(surfaces, equivalent, corrective) -> CDR of ``conversions.diagnostics_msg(kit, ...)``."""
+def diagnostics_encoder() -> Callable[[Sequence[float], Sequence[float], Sequence[float], Sequence[float]], bytes]:
+    """encode(surfaces, equivalent, corrective, slopes) -> CDR of ``conversions.diagnostics_msg(kit, ...)``."""
     pack, (constant,) = _multi_array_layout(DIAGNOSTICS_DIMS).compile()
     pack = pack.pack
     interleave = chain.from_iterable
 
-    def encode(surfaces: Sequence[float], equivalent: Sequence[float], corrective: Sequence[float]) -> bytes:
-        return pack(ENCAPSULATION, constant, *interleave(zip(surfaces, equivalent, corrective)))
+    def encode(surfaces: Sequence[float], equivalent: Sequence[float], corrective: Sequence[float],
+               slopes: Sequence[float]) -> bytes:
+        return pack(ENCAPSULATION, constant, *interleave(zip(surfaces, equivalent, corrective, slopes)))
     return encode
 
 

@@ -51,13 +51,15 @@ def subscription(node: Node, kit: MessageKit, topic: TopicSpec, callback: Callab
 
 
 def declare(node: Node, name: str, default: Any, description: str,
-            bounds: tuple[float, float] | None = None, choices: Sequence[str] | None = None) -> Any:
+            bounds: tuple[float, float] | None = None, choices: Sequence[str] | None = None,
+            read_only: str | None = None) -> Any:
     """Declare a parameter with its description and valid range, return its (validated) value.
 
     An out-of-range or wrong-typed value (from a params file or --ros-args -p) raises
-    ParameterError naming the parameter and its valid range.
+    ParameterError naming the parameter and its valid range. ``read_only``: why the parameter cannot
+    change while the node runs (it is then declared read-only and its description says so).
     """
-    descriptor = ParameterDescriptor(description=description)
+    descriptor = ParameterDescriptor(description=description, read_only=read_only is not None)
     range_text = ''
     if bounds is not None:
         low, high = bounds
@@ -71,6 +73,8 @@ def declare(node: Node, name: str, default: Any, description: str,
         range_text = f' valid values {", ".join(choices)}'
         descriptor.additional_constraints = 'one of: ' + ', '.join(choices)
     descriptor.description += f' ({range_text.strip()})' if range_text else ''
+    if read_only is not None:
+        descriptor.description += f' [read-only: {read_only}]'
     try:
         value = node.declare_parameter(name, default, descriptor).value
     except (InvalidParameterValueException, ParameterException, TypeError) as error:

@@ -102,10 +102,11 @@ class FlightBag:
 
     def record_step(self, odometry: OdometrySample, forces: Sequence[float], controls: Sequence[float],
                     reference_position: Sequence[float], reference_yaw: float, surfaces: Sequence[float],
-                    equivalent: Sequence[float], corrective: Sequence[float],
+                    equivalent: Sequence[float], corrective: Sequence[float], slopes: Sequence[float],
                     truth: OdometrySample | None = None) -> None:
         """One control step: the odometry answered, the thrusts [N] and U1..U4 sent, the reference
-        [m, rad] used and the per-subsystem sliding surfaces, NN and fuzzy terms; with ``truth``
+        [m, rad] used and the per-subsystem sliding surfaces, NN and fuzzy terms and surface slopes
+        lambda [1/s]; with ``truth``
         (the true state when the odometry carries sensor noise) also ``ground_truth/odom``."""
         stamp = nanoseconds(odometry.stamp)
         sec, nanosec = divmod(stamp, NANOSECONDS_PER_SECOND)
@@ -125,7 +126,7 @@ class FlightBag:
         if self._reference:
             write(self._reference, self._encode_pose(sec, nanosec, reference_position, reference_yaw), stamp)
         if self._diagnostics:
-            write(self._diagnostics, self._encode_diagnostics(surfaces, equivalent, corrective), stamp)
+            write(self._diagnostics, self._encode_diagnostics(surfaces, equivalent, corrective, slopes), stamp)
 
     def close(self) -> None:
         self.writer.close()

@@ -144,7 +144,7 @@ def _flight_record(topics: _Topics, warnings: list) -> FlightRecord | None:
                         f'{len(topics.diagnostics)} diagnostics; pairing the first {steps} by order')
     recorder = FlightRecorder()
     skipped = 0
-    for stamp, controls, forces, (surfaces, equivalent, corrective) in zip(
+    for stamp, controls, forces, (surfaces, equivalent, corrective, _) in zip(
             topics.stamps, topics.controls, topics.forces, topics.diagnostics):
         sample, reference = (topics.truth or topics.odometry).get(stamp), topics.references.get(stamp)
         if sample is None or reference is None:
