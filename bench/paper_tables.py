@@ -201,6 +201,12 @@ def delay_margin(flight: Flight, undelayed: Outcome | None = None, max_delay: fl
     return DelayMargin(control_dt, failing, max_steps, tried)
 
 
+def monotone(unstable_at: dict) -> bool:
+    """Whether {delay [steps]: unstable?} never has a stable delay above an unstable one."""
+    verdicts = [unstable_at[steps] for steps in sorted(unstable_at)]
+    return all(not (earlier and not later) for earlier, later in zip(verdicts, verdicts[1:]))
+
+
 def _delay_margin_task(task):
     return delay_margin(*task)
 
@@ -257,7 +263,9 @@ def delay_table(controllers, scenario, duration, flown, margins) -> list[str]:
     rows = []
     for kind in controllers:
         base, delayed = flown[Flight(kind, scenario, duration)], flown[Flight(kind, scenario, duration, row_steps)]
-        rows.append([kind, margins[kind].text, number(base.rmse_cm), number(delayed.rmse_cm),
+        known = {**margins[kind].tried, 0: False, row_steps: unstable(delayed, base)}
+        rows.append([kind, margins[kind].text + ('' if monotone(known) else ' (not monotone)'),
+                     number(base.rmse_cm), number(delayed.rmse_cm),
                      number(base.tail_chattering['U2']), number(delayed.tail_chattering['U2']),
                      number(base.tail_chattering['U3']), number(delayed.tail_chattering['U3']),
                      failure_note(delayed)])
@@ -267,8 +275,9 @@ def delay_table(controllers, scenario, duration, flown, margins) -> list[str]:
          f'TV(U2) {ms}', 'TV(U3) [N/s] no delay', f'TV(U3) {ms}', f'note ({ms})'], rows) + [
         '', f'Delay margin: smallest delay (bisection over 0..{1e3 * MAX_DELAY:g} ms in control steps) at which the '
         f'flight fails or TV(U2) + TV(U3) over its last {TAIL:g} s or its RMSE exceeds {INSTABILITY_FACTOR:g}x '
-        f'the no-delay value (bench/paper_tables.py). TV columns: the last {TAIL:g} s of the flight (its '
-        'settled part if that is shorter).']
+        f'the no-delay value (bench/paper_tables.py); "not monotone": a flight flown here with a longer delay than '
+        'an unstable one was stable, so the bisection may have missed a smaller unstable delay. TV columns: '
+        f'the last {TAIL:g} s of the flight (its settled part if that is shorter).']
 
 
 def rate_table(controllers, scenario, duration, rates, flown) -> list[str]:

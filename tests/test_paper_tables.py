@@ -8,11 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from flight_stack.embedded import fly_embedded
+from flight_stack.embedded import Perturbations, fly_embedded
 from nnit2fsmc_controller.factory import load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.review.metrics import flight_metrics
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
+from quad_sim.perturbations.streams import flight_streams
 
 SCRIPT = Path(__file__).resolve().parent.parent / 'bench' / 'paper_tables.py'
 SPEC = importlib.util.spec_from_file_location('paper_tables', SCRIPT)
@@ -22,14 +24,23 @@ SPEC.loader.exec_module(paper_tables)
 CONTROLLERS = ['nnit2fsmc', 'pid']
 DURATION = 3.0      # [s]: metrics after 1.5 s
 SETTLE = 1.5
+NOISE_TITLE = ('Sensor noise (paper, 3 s; position 1 cm, velocity 2 cm/s, attitude 0.01 rad, '
+               'body rate 0.02 rad/s)')
 
 
-def direct_metrics(kind, control_rate=1000.0):
-    """The paper flight of DURATION s, flown and measured without bench/paper_tables.py."""
+def direct_metrics(kind, control_rate=1000.0, noisy=False):
+    """The paper flight of DURATION s, flown and measured without bench/paper_tables.py; ``noisy``: with
+    the sensor noise of campaigns/paper-robustness.yaml (no bias), streams of seed 1, flight 0."""
     params, disturbances = load_vehicle_file()
     gains = load_gains()
     gains['common']['control_rate'] = control_rate
-    record = fly_embedded(kind, make_scenario('paper', DURATION), params, disturbances, gains, DURATION, 1000.0).record
+    noise = None
+    if noisy:
+        streams = flight_streams(1, 0)
+        noise = SensorNoise(SensorErrors(position=0.01, velocity=0.02, attitude=0.01, body_rate=0.02), SensorErrors(),
+                            streams.sensor_noise, streams.sensor_bias)
+    record = fly_embedded(kind, make_scenario('paper', DURATION), params, disturbances, gains, DURATION, 1000.0,
+                          perturbations=Perturbations(sensor_noise=noise)).record
     return flight_metrics(record, SETTLE, params.F_min, params.F_max)
 
 
@@ -49,7 +60,7 @@ def parse_tables(text):
 @pytest.fixture(scope='module')
 def output(tmp_path_factory):
     out = tmp_path_factory.mktemp('tables') / 'tables.md'
-    paper_tables.main(['--experiments', 'nominal,rate', '--controllers', ','.join(CONTROLLERS),
+    paper_tables.main(['--experiments', 'nominal,rate,noise', '--controllers', ','.join(CONTROLLERS),
                        '--duration', str(DURATION), '--rates', '1000,100', '--scenarios', 'paper,no-such-path',
                        '--out', str(out)])
     return out.read_text()
@@ -59,13 +70,14 @@ def output(tmp_path_factory):
 def test_tables_have_one_row_per_controller_and_a_cell_per_column(output):
     tables = parse_tables(output)
     assert list(tables) == ['Nominal flight (paper, 3 s, section IV disturbances)',
-                            'Control rate (paper, 3 s, the same gains file)']
+                            'Control rate (paper, 3 s, the same gains file)', NOISE_TITLE]
     for header, rows in tables.values():
         assert [row[0] for row in rows] == CONTROLLERS
         assert all(len(row) == len(header) for row in rows)
     nominal_header, _ = tables['Nominal flight (paper, 3 s, section IV disturbances)']
     assert nominal_header[:3] == ['controller', 'RMSE [cm]', 'max error [cm]'] and len(nominal_header) == 10
-    assert "nominal on 'no-such-path' skipped" in output and "rate on 'no-such-path' skipped" in output
+    for experiment in ('nominal', 'rate', 'noise'):
+        assert f"{experiment} on 'no-such-path' skipped" in output
 
 
 def close(cell, value):
@@ -94,6 +106,16 @@ def test_rate_numbers_are_those_of_direct_flights(output):
     assert close(row[1], fast) and close(row[2], slow) and close(row[3], slow / fast)
 
 
+@pytest.mark.slow
+def test_noise_numbers_are_those_of_direct_flights(output):
+    _, rows = parse_tables(output)[NOISE_TITLE]
+    row = dict(zip(CONTROLLERS, rows))['nnit2fsmc']
+    noisy, sign = direct_metrics('nnit2fsmc', noisy=True), direct_metrics('smc-sign')
+    total = sum(noisy['chattering'].values())
+    assert close(row[1], 100.0 * noisy['rmse_position_m']) and close(row[2], total)
+    assert close(row[3], total / sum(sign['chattering'].values()))
+
+
 def outcome(rmse_cm, attitude_tv, failure=None):
     tv = 0.5 * attitude_tv
     return paper_tables.Outcome({'rmse_position_m': rmse_cm / 100.0, 'chattering': {}},
@@ -119,3 +141,8 @@ def test_delay_margin_bisection_brackets_the_margin():
     below = margin.margin_steps - 1
     assert below == 0 or margin.tried[below] is False
     assert margin.text == f'{margin.margin_steps:g} ms'
+
+
+def test_monotone_delay_verdicts():
+    assert paper_tables.monotone({0: False, 5: False, 7: True, 100: True})
+    assert not paper_tables.monotone({0: False, 18: True, 20: False, 100: True})
