@@ -117,13 +117,14 @@ def test_every_kind_builds_and_keeps_rotor_forces_within_limits(kind):
         assert all(math.isfinite(a.value) for a in out.axes.values())
 
 
+@pytest.mark.parametrize('params', [PARAMS, ASYMMETRIC], ids=['paper', 'asymmetric'])
 @pytest.mark.parametrize('kind', ['smc-sign', 'smc-sat', 'pid'])
 @pytest.mark.parametrize('yaw', [0.0, 2.0])
-def test_model_based_controllers_command_the_hover_forces_at_equilibrium(kind, yaw):
-    controller = build_controller(kind, PARAMS, GAINS)
+def test_model_based_controllers_command_the_hover_forces_at_equilibrium(kind, yaw, params):
+    controller = build_controller(kind, params, GAINS)
     state = [0.5, -1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, yaw, 0.0, 0.0, 0.0]
     out = controller.update(0.0, state, hold((0.5, -1.0, 2.0), yaw))
-    np.testing.assert_allclose(out.forces, (PARAMS.hover_force,) * 4, rtol=1e-14)
+    np.testing.assert_allclose(out.forces, (params.hover_force,) * 4, rtol=1e-14)
 
 
 def test_nnit2fsmc_starts_knowing_nothing():

@@ -14,8 +14,9 @@ SCALE = 0.7          # input_scale [units of S]: the universe of S is [-0.7, 0.7
 HEIGHT = 0.6         # lower membership height (the packaged default)
 HALF_WIDTH = 0.35    # lower membership half-width in normalised units
 FAR = 1e6            # the outer shoulders of NB and PB reach this far in S
-# The reference's own rule base and labels, as the paper prints them (Table 2, Fig. 5): never the
-# implementation's RULES, so that an error in its rule table shows up against pyit2fls.
+# The reference's own labels and rule base, Table 2 as the paper prints it, never the implementation's
+# RULES, so that an error in its rule table shows up against pyit2fls. The paper gives no numbers for
+# the label positions: evenly spaced centres and output levels are this project's design (docs/PAPER.md).
 LABELS = ('NB', 'NM', 'ZE', 'PM', 'PB')
 CENTRES = (-1.0, -0.5, 0.0, 0.5, 1.0)            # of the input labels, in units of the universe
 LEVELS = {'NB': -1.0, 'NM': -0.5, 'ZE': 0.0, 'PM': 0.5, 'PB': 1.0}     # crisp output levels
