@@ -151,14 +151,23 @@ def fly(flight: Flight) -> Outcome:
     return Outcome(metrics, tail['chattering'], result.failure, result.failure_time_s)
 
 
-def unstable(outcome: Outcome, undelayed: Outcome) -> bool:
-    """The delay criterion of the module docstring: failed, or a 10x growth of the attitude
-    chattering over the last 20 s or of the RMSE, against the flight without delay."""
+def instability(outcome: Outcome, undelayed: Outcome) -> str | None:
+    """Why ``outcome`` is unstable by the delay criterion of the module docstring (failed, or a 10x
+    growth of the attitude chattering over the last 20 s or of the RMSE against the flight without
+    delay, ``undelayed``), or None when it is not."""
     if outcome.failure is not None:
-        return True
-    grown = INSTABILITY_FACTOR * undelayed.attitude_tail_chattering
-    return (not outcome.attitude_tail_chattering <= grown
-            or not outcome.rmse_cm <= INSTABILITY_FACTOR * undelayed.rmse_cm)
+        return outcome.failure
+    for name, delayed, without in (('TV(U2)+TV(U3)', outcome.attitude_tail_chattering,
+                                    undelayed.attitude_tail_chattering),
+                                   ('RMSE', outcome.rmse_cm, undelayed.rmse_cm)):
+        if not delayed <= INSTABILITY_FACTOR * without:      # (NaN, of a failed flight, is unstable)
+            return (f'{name} x{delayed / without:.3g}' if without > 0.0
+                    else f'{name} {delayed:.3g}, no delay {without:.3g}')
+    return None
+
+
+def unstable(outcome: Outcome, undelayed: Outcome) -> bool:
+    return instability(outcome, undelayed) is not None
 
 
 @dataclass(frozen=True)
@@ -168,13 +177,14 @@ class DelayMargin:
     control_dt: float        #: [s]
     margin_steps: int | None  #: smallest unstable delay [control steps]; None: none up to max_steps
     max_steps: int           #: the range searched, 0..max_steps
-    tried: dict              #: delay [steps] -> unstable? for every flight flown
+    tried: dict              #: delay [steps] -> why it is unstable (:func:`instability`), None if stable
 
     @property
     def text(self) -> str:
+        """The margin [ms] and what made it unstable."""
         if self.margin_steps is None:
             return f'> {1e3 * self.max_steps * self.control_dt:g} ms'
-        return f'{1e3 * self.margin_steps * self.control_dt:g} ms'
+        return f'{1e3 * self.margin_steps * self.control_dt:g} ms ({self.tried[self.margin_steps]})'
 
 
 def delay_margin(flight: Flight, undelayed: Outcome | None = None, max_delay: float = MAX_DELAY) -> DelayMargin:
@@ -186,8 +196,8 @@ def delay_margin(flight: Flight, undelayed: Outcome | None = None, max_delay: fl
     tried = {}
 
     def is_unstable(steps: int) -> bool:
-        tried[steps] = unstable(fly(replace(flight, delay_steps=steps)), undelayed)
-        return tried[steps]
+        tried[steps] = instability(fly(replace(flight, delay_steps=steps)), undelayed)
+        return tried[steps] is not None
 
     if not is_unstable(max_steps):
         return DelayMargin(control_dt, None, max_steps, tried)
@@ -201,9 +211,9 @@ def delay_margin(flight: Flight, undelayed: Outcome | None = None, max_delay: fl
     return DelayMargin(control_dt, failing, max_steps, tried)
 
 
-def monotone(unstable_at: dict) -> bool:
-    """Whether {delay [steps]: unstable?} never has a stable delay above an unstable one."""
-    verdicts = [unstable_at[steps] for steps in sorted(unstable_at)]
+def monotone(instabilities: dict) -> bool:
+    """Whether {delay [steps]: instability or None} never has a stable delay above an unstable one."""
+    verdicts = [instabilities[steps] is not None for steps in sorted(instabilities)]
     return all(not (earlier and not later) for earlier, later in zip(verdicts, verdicts[1:]))
 
 
@@ -263,7 +273,7 @@ def delay_table(controllers, scenario, duration, flown, margins) -> list[str]:
     rows = []
     for kind in controllers:
         base, delayed = flown[Flight(kind, scenario, duration)], flown[Flight(kind, scenario, duration, row_steps)]
-        known = {**margins[kind].tried, 0: False, row_steps: unstable(delayed, base)}
+        known = {**margins[kind].tried, 0: None, row_steps: instability(delayed, base)}
         rows.append([kind, margins[kind].text + ('' if monotone(known) else ' (not monotone)'),
                      number(base.rmse_cm), number(delayed.rmse_cm),
                      number(base.tail_chattering['U2']), number(delayed.tail_chattering['U2']),

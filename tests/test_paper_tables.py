@@ -129,6 +129,10 @@ def test_delay_criterion():
     assert paper_tables.unstable(outcome(0.2, 10.1), undelayed)
     assert paper_tables.unstable(outcome(2.1, 1.0), undelayed)
     assert paper_tables.unstable(outcome(0.2, 1.0, 'crashed'), undelayed)
+    assert paper_tables.instability(outcome(0.2, 1.0, 'crashed'), undelayed) == 'crashed'
+    assert paper_tables.instability(outcome(0.2, 12.0), undelayed) == 'TV(U2)+TV(U3) x12'
+    assert paper_tables.instability(outcome(2.5, 1.0), undelayed) == 'RMSE x12.5'
+    assert paper_tables.instability(outcome(1.9, 9.9), undelayed) is None
     assert paper_tables.unstable(outcome(math.nan, math.nan), undelayed)
 
 
@@ -137,12 +141,12 @@ def test_delay_margin_bisection_brackets_the_margin():
     """nnit2fsmc on 3 s of the helix, delays up to 12 ms: the margin is unstable, one step less is not."""
     margin = paper_tables.delay_margin(paper_tables.Flight('nnit2fsmc', 'paper', DURATION), max_delay=0.012)
     assert margin.margin_steps is not None and margin.max_steps == 12
-    assert margin.tried[margin.margin_steps] and margin.tried[12]
+    assert margin.tried[margin.margin_steps] is not None and margin.tried[12] is not None
     below = margin.margin_steps - 1
-    assert below == 0 or margin.tried[below] is False
-    assert margin.text == f'{margin.margin_steps:g} ms'
+    assert below == 0 or margin.tried[below] is None
+    assert margin.text == f'{margin.margin_steps:g} ms ({margin.tried[margin.margin_steps]})'
 
 
 def test_monotone_delay_verdicts():
-    assert paper_tables.monotone({0: False, 5: False, 7: True, 100: True})
-    assert not paper_tables.monotone({0: False, 18: True, 20: False, 100: True})
+    assert paper_tables.monotone({0: None, 5: None, 7: 'RMSE x11', 100: 'crashed'})
+    assert not paper_tables.monotone({0: None, 18: 'RMSE x10.9', 20: None, 100: 'crashed'})
