@@ -11,10 +11,11 @@ from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, control_
 from quad_msgs_bridge.frames import rotation_from_euler
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.reference import ReferenceSample, hold
+from quad_msgs_bridge.state import DPHI, DPSI, DTHETA, VX, VY, VZ
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
-from quad_sim.model import QuadrotorModel
+from vehicle_support import ASYMMETRIC, paper_eq1
 
-PARAMS, DISTURBANCES = load_vehicle_file()
+PARAMS, _ = load_vehicle_file()
 GAINS = load_gains()
 
 
@@ -116,13 +117,14 @@ def test_every_kind_builds_and_keeps_rotor_forces_within_limits(kind):
         assert all(math.isfinite(a.value) for a in out.axes.values())
 
 
+@pytest.mark.parametrize('params', [PARAMS, ASYMMETRIC], ids=['paper', 'asymmetric'])
 @pytest.mark.parametrize('kind', ['smc-sign', 'smc-sat', 'pid'])
 @pytest.mark.parametrize('yaw', [0.0, 2.0])
-def test_model_based_controllers_command_the_hover_forces_at_equilibrium(kind, yaw):
-    controller = build_controller(kind, PARAMS, GAINS)
+def test_model_based_controllers_command_the_hover_forces_at_equilibrium(kind, yaw, params):
+    controller = build_controller(kind, params, GAINS)
     state = [0.5, -1.0, 2.0, 0.0, 0.0, 0.0, 0.0, 0.0, yaw, 0.0, 0.0, 0.0]
     out = controller.update(0.0, state, hold((0.5, -1.0, 2.0), yaw))
-    np.testing.assert_allclose(out.forces, (PARAMS.hover_force,) * 4, rtol=1e-14)
+    np.testing.assert_allclose(out.forces, (params.hover_force,) * 4, rtol=1e-14)
 
 
 def test_nnit2fsmc_starts_knowing_nothing():
@@ -144,20 +146,31 @@ class SpyLaw:
         return AxisOutput(self.value, de, self.value, 0.0)
 
 
-def test_nominal_model_of_the_baselines_is_eq1():
-    """For z, phi, theta, psi: q'' = drift + gain * v reproduces the simulator's eq. (1) exactly."""
+@pytest.mark.parametrize('params', [PARAMS, ASYMMETRIC], ids=['paper', 'asymmetric'])
+def test_nominal_model_of_the_baselines_is_eq1(params):
+    """q'' = drift + gain * v, as the cascade hands it to each law, is eq. (1) written out in the test
+    (vehicle_support.paper_eq1), on the paper's vehicle and on one with every inertia and drag different.
+
+    z, phi, theta, psi: drift + gain * v is the acceleration the realised U1..U4 give. x, y: v is an
+    acceleration (gain 1) and the drift is the acceleration of eq. (1) without thrust (the drag).
+    """
     values = {'x': 0.0, 'y': 0.0, 'z': 5.1, 'phi': 0.05, 'theta': -0.04, 'psi': 0.002}
     laws = {axis: SpyLaw(v) for axis, v in values.items()}
-    controller = CascadedController('spy', PARAMS, laws, dt=1e-3)
+    controller = CascadedController('spy', params, laws, dt=1e-3)
     state = [0.1, 0.2, 1.5, 0.3, -0.2, 0.1, 0.1, -0.05, 0.4, 0.5, -0.7, 0.9]
     out = controller.update(0.0, state, hold((0.0, 0.0, 1.5), 0.4))
-    assert out.forces == pytest.approx(tuple(out.forces))   # inside the limits: U realised exactly
+    # inside the rotor limits, so the U1..U4 asked for are realised exactly
+    assert all(params.F_min < f < params.F_max for f in out.forces), out.forces
     np.testing.assert_allclose(out.controls, [values['z'], values['phi'], values['theta'], values['psi']],
                                atol=1e-12)
-    derivative = QuadrotorModel(PARAMS, DISTURBANCES.switched(False)).derivative(0.0, state, out.controls)
-    for axis, index in (('z', 5), ('phi', 9), ('theta', 10), ('psi', 11)):
+    calm = (0.0,) * 6
+    driven, unpowered = paper_eq1(params, state, out.controls, calm), paper_eq1(params, state, (0.0,) * 4, calm)
+    for axis, index, expected in (('x', VX, unpowered[VX]), ('y', VY, unpowered[VY]), ('z', VZ, driven[VZ]),
+                                  ('phi', DPHI, driven[DPHI]), ('theta', DTHETA, driven[DTHETA]),
+                                  ('psi', DPSI, driven[DPSI])):
         *_, drift, gain = laws[axis].calls[0]
-        assert drift + gain * values[axis] == pytest.approx(derivative[index], rel=1e-12), axis
+        assert drift + gain * values[axis] == pytest.approx(expected, rel=1e-12, abs=1e-15), axis
+    assert [laws[axis].calls[0][-1] for axis in ('x', 'y')] == [1.0, 1.0]
 
 
 def test_yaw_error_is_wrapped():

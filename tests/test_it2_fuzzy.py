@@ -7,13 +7,20 @@ import pytest
 
 pyit2fls = pytest.importorskip('pyit2fls')
 
-from nnit2fsmc_controller.it2_fuzzy import CENTRES, CONSEQUENTS, LABELS, RULES, IT2FuzzyCorrector  # noqa: E402
+from nnit2fsmc_controller.it2_fuzzy import CONSEQUENTS, RULES, IT2FuzzyCorrector  # noqa: E402
 from quad_msgs_bridge.vehicle_params import ParameterError  # noqa: E402
 
 SCALE = 0.7          # input_scale [units of S]: the universe of S is [-0.7, 0.7]
 HEIGHT = 0.6         # lower membership height (the packaged default)
 HALF_WIDTH = 0.35    # lower membership half-width in normalised units
 FAR = 1e6            # the outer shoulders of NB and PB reach this far in S
+# The reference's own labels and rule base, Table 2 as the paper prints it, never the implementation's
+# RULES, so that an error in its rule table shows up against pyit2fls. The paper gives no numbers for
+# the label positions: evenly spaced centres and output levels are this project's design (docs/PAPER.md).
+LABELS = ('NB', 'NM', 'ZE', 'PM', 'PB')
+CENTRES = (-1.0, -0.5, 0.0, 0.5, 1.0)            # of the input labels, in units of the universe
+LEVELS = {'NB': -1.0, 'NM': -0.5, 'ZE': 0.0, 'PM': 0.5, 'PB': 1.0}     # crisp output levels
+TABLE_2 = {'NB': 'PB', 'NM': 'PM', 'ZE': 'ZE', 'PM': 'NM', 'PB': 'NB'}   # surface -> U_fuzzy
 
 
 def reference_memberships(s: float):
@@ -39,7 +46,7 @@ def reference_memberships(s: float):
 
 def reference_intervals(s: float) -> np.ndarray:
     """Rows [y, y, f_lower, f_upper] per rule of Table 2 (single antecedent: firing = membership)."""
-    rows = [[CONSEQUENTS[RULES[label]]] * 2 + list(firing)
+    rows = [[LEVELS[TABLE_2[label]]] * 2 + list(firing)
             for label, firing in zip(LABELS, reference_memberships(s))]
     return np.array(rows, dtype=float)
 
@@ -113,14 +120,13 @@ def test_output_is_the_centre_of_the_type_reduced_interval_times_the_gain():
         assert scaled(s) == pytest.approx(gain * 0.5 * (y_l + y_r), abs=1e-15)
 
 
-def test_rule_table_is_the_mirror_of_the_antecedents():
-    """Table 2: NB->PB, NM->PM, ZE->ZE, PM->NM, PB->NB, so the consequent of a label is minus its centre."""
-    assert RULES == {'NB': 'PB', 'NM': 'PM', 'ZE': 'ZE', 'PM': 'NM', 'PB': 'NB'}
-    for label, centre in zip(LABELS, CENTRES):
-        assert CONSEQUENTS[RULES[label]] == -centre
-    mirror = dict(zip(LABELS, reversed(LABELS)))
-    for label in LABELS:
-        assert RULES[mirror[label]] == mirror[RULES[label]]
+def test_rule_table_is_table_2():
+    """The implementation's rule base is Table 2 as printed, with the output levels of the labels."""
+    assert RULES == TABLE_2
+    assert CONSEQUENTS == LEVELS
+    corrector = IT2FuzzyCorrector(SCALE, output_gain=1.0)
+    for label, centre in zip(LABELS, CENTRES):     # at a label's centre only its rule fires
+        assert corrector(SCALE * centre) == pytest.approx(LEVELS[TABLE_2[label]], abs=1e-15), label
 
 
 @pytest.mark.parametrize('reducer', ['km', 'nie-tan'])

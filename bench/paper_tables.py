@@ -1,0 +1,400 @@
+#!/usr/bin/env python3
+"""The Markdown tables of docs/PAPER.md: nominal flight, delay margin, control rate, sensor noise.
+
+    .venv/bin/python bench/paper_tables.py                       # every experiment, every controller
+    .venv/bin/python bench/paper_tables.py --experiments delay --controllers nnit2fsmc,pid
+    .venv/bin/python bench/paper_tables.py --duration 20 --jobs 2 --out tables.md
+
+Every flight is an embedded flight (:func:`flight_stack.embedded.fly_embedded`, the code path of
+``run_stack.py --backend embedded``) of the nominal vehicle with the section IV disturbances, the
+packaged gains file, physics at 1 kHz; its figures are those of the review
+(:func:`quad_msgs_bridge.review.metrics.flight_metrics`) after the settling time (5 s, or half a
+flight shorter than 10 s). A flight fails (and its row says so) when the vehicle goes non-finite,
+flips, crashes or strays more than 1 m from the reference after settling (``api.fly``'s default).
+
+Controllers: ``--controllers a,b`` or every kind of ``nnit2fsmc_controller.factory.CONTROLLERS``
+at run time. Scenarios: names of ``nnit2fsmc_controller.trajectory.SCENARIOS`` (``paper`` is the
+60 s helix); a name not known there is skipped with a note under its table. ``--duration``
+shortens every flight (default: each scenario's own length).
+
+Experiments (``--experiments``, default all; ``--scenarios`` applies to each chosen one, default
+``paper``, and ``paper,lemniscate`` for noise):
+
+* ``nominal``: RMSE and max position error [cm], total variation per second of U1..U4 [N/s; U4
+  N m/s] and their sum, share of settled steps with a rotor at a limit.
+* ``delay``: the delay margin, by bisection on the transport delay in whole control steps over
+  0..100 ms; and the flight with 20 ms beside the flight without delay.
+  **Criterion.** A delay is *unstable* when the flight fails (divergence: see above), or when the
+  attitude chattering TV(U2) + TV(U3) over the last 20 s of the flight (the settled part if that is
+  shorter) exceeds 10 times its value without delay (a limit cycle), or when the position RMSE
+  exceeds 10 times its value without delay. The margin is the smallest unstable delay; the
+  bisection assumes that every longer delay is unstable too. Why these numbers: a limit cycle of
+  amplitude A at frequency f adds 4 A f of variation per second, so an oscillation shows up as a
+  jump in TV while a slow tracking change does not; the last 20 s leave the take-off and the
+  reaching transient (which any delay lengthens) out, so a decaying transient is not a limit cycle;
+  10x is the bound of the issue's delay check (TV within 10x of no delay), and, for the RMSE, far
+  beyond the few-percent changes a delay of a step or two makes. Relative thresholds make the
+  criterion fair to controllers that chatter (sign-SMC) or track loosely (a soft PID) by design.
+* ``rate``: the same gains file at control rates of 1000, 250 and 100 Hz (``--rates``): RMSE and
+  its ratio to the 1 kHz flight.
+* ``noise``: sensor noise of the example campaign (campaigns/paper-robustness.yaml: position 1 cm,
+  velocity 2 cm/s, attitude 0.01 rad, body rate 0.02 rad/s, white, no bias, flight streams of
+  seed 1, flight 0): RMSE and total chattering, beside the sign-SMC's noise-free total chattering
+  on the same scenario.
+
+``--jobs N`` flies N flights at a time in a process pool (default 1: in this process). Deterministic:
+the same command gives the same tables (seeded network and noise). The tables go to stdout, and
+with ``--out FILE`` to that file too.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import multiprocessing
+import sys
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
+from flight_stack.closed_loop import FailureRules  # noqa: E402
+from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
+from nnit2fsmc_controller import factory  # noqa: E402
+from nnit2fsmc_controller import trajectory as trajectories  # noqa: E402
+from quad_msgs_bridge.review.metrics import default_settle_time, flight_metrics, has_fuzzy_term  # noqa: E402
+from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
+from quad_sim.perturbations.actuation import TransportDelay  # noqa: E402
+from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise  # noqa: E402
+from quad_sim.perturbations.streams import flight_streams  # noqa: E402
+
+EXPERIMENTS = ('nominal', 'delay', 'rate', 'noise')
+DEFAULT_SCENARIOS = {'nominal': ('paper',), 'delay': ('paper',), 'rate': ('paper',), 'noise': ('paper', 'lemniscate')}
+PHYSICS_RATE = 1000.0        #: [Hz]
+MAX_ERROR = 1.0              #: [m] position error after settling beyond which a flight has failed
+CONTROLS = ('U1', 'U2', 'U3', 'U4')
+MAX_DELAY = 0.100            #: [s] the delay bisection's range is 0..MAX_DELAY
+DELAY_ROW = 0.020            #: [s] the delay of the side-by-side row
+TAIL = 20.0                  #: [s] the delay criterion's chattering window: the end of the flight
+INSTABILITY_FACTOR = 10.0    #: growth of TV(U2) + TV(U3) or of the RMSE that counts as unstable
+DEFAULT_RATES = (1000.0, 250.0, 100.0)   #: [Hz]
+NOISE = SensorErrors(position=0.01, velocity=0.02, attitude=0.01, body_rate=0.02)   #: the example campaign's
+NOISE_SEED = 1
+CHATTERING_REFERENCE = 'smc-sign'
+
+
+@dataclass(frozen=True)
+class Flight:
+    """One flight of the tables: what differs from the nominal paper flight."""
+
+    controller: str
+    scenario: str
+    duration: float | None = None      #: [s] None: the scenario's own
+    delay_steps: int = 0               #: transport delay [control steps]
+    control_rate: float | None = None  #: [Hz] None: the gains file's
+    noise: bool = False                #: the example campaign's sensor noise
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """The figures of a flight."""
+
+    metrics: dict               #: flight_metrics(...) after the settling time
+    tail_chattering: dict       #: TV per second of U1..U4 over the last TAIL s (settled part if shorter)
+    failure: str | None         #: why the flight ended early, or None
+    failure_time: float | None  #: [s]
+
+    @property
+    def rmse_cm(self) -> float:
+        return 100.0 * self.metrics['rmse_position_m']
+
+    @property
+    def total_chattering(self) -> float:
+        """TV(U1) + TV(U2) + TV(U3) + TV(U4) per second [N/s, U4 N m/s], settled flight."""
+        return sum(self.metrics['chattering'][c] for c in CONTROLS)
+
+    @property
+    def attitude_tail_chattering(self) -> float:
+        """TV(U2) + TV(U3) per second over the last TAIL s [N/s]."""
+        return self.tail_chattering['U2'] + self.tail_chattering['U3']
+
+
+def gains_for(control_rate: float | None) -> dict:
+    """The packaged gains, at ``control_rate`` [Hz] if given (nothing else changed)."""
+    gains = factory.load_gains()
+    if control_rate is not None:
+        gains['common'] = {**gains['common'], 'control_rate': float(control_rate)}
+    return gains
+
+
+def fly(flight: Flight) -> Outcome:
+    """Fly ``flight`` on the embedded backend and take its figures."""
+    params, disturbances = load_vehicle_file()
+    gains = gains_for(flight.control_rate)
+    control_dt = factory.control_period(gains)
+    path = trajectories.make_scenario(flight.scenario, flight.duration)
+    duration = path.duration if flight.duration is None else flight.duration
+    settle = default_settle_time(duration)
+    noise = None
+    if flight.noise:
+        streams = flight_streams(NOISE_SEED, 0)
+        noise = SensorNoise(NOISE, SensorErrors(), streams.sensor_noise, streams.sensor_bias)
+    perturbations = Perturbations(sensor_noise=noise,
+                                  delay=TransportDelay(flight.delay_steps) if flight.delay_steps else None)
+    result = fly_embedded(flight.controller, path, params, disturbances, gains, duration, PHYSICS_RATE,
+                          perturbations=perturbations, rules=FailureRules(settle, MAX_ERROR))
+    failed = result.failure is not None
+    figures = dict(f_min=params.F_min, f_max=params.F_max, fuzzy_term=has_fuzzy_term(flight.controller),
+                   ended_early=failed)
+    metrics = flight_metrics(result.record, settle, **figures)
+    tail = flight_metrics(result.record, max(settle, duration - control_dt - TAIL), **figures)
+    return Outcome(metrics, tail['chattering'], result.failure, result.failure_time_s)
+
+
+def instability(outcome: Outcome, undelayed: Outcome) -> str | None:
+    """Why ``outcome`` is unstable by the delay criterion of the module docstring (failed, or a 10x
+    growth of the attitude chattering over the last 20 s or of the RMSE against the flight without
+    delay, ``undelayed``), or None when it is not."""
+    if outcome.failure is not None:
+        return outcome.failure
+    for name, delayed, without in (('TV(U2)+TV(U3)', outcome.attitude_tail_chattering,
+                                    undelayed.attitude_tail_chattering),
+                                   ('RMSE', outcome.rmse_cm, undelayed.rmse_cm)):
+        if not delayed <= INSTABILITY_FACTOR * without:      # (NaN, of a failed flight, is unstable)
+            return (f'{name} x{delayed / without:.3g}' if without > 0.0
+                    else f'{name} {delayed:.3g}, no delay {without:.3g}')
+    return None
+
+
+def unstable(outcome: Outcome, undelayed: Outcome) -> bool:
+    return instability(outcome, undelayed) is not None
+
+
+@dataclass(frozen=True)
+class DelayMargin:
+    """The result of :func:`delay_margin`."""
+
+    control_dt: float        #: [s]
+    margin_steps: int | None  #: smallest unstable delay [control steps]; None: none up to max_steps
+    max_steps: int           #: the range searched, 0..max_steps
+    tried: dict              #: delay [steps] -> why it is unstable (:func:`instability`), None if stable
+
+    @property
+    def text(self) -> str:
+        """The margin [ms] and what made it unstable."""
+        if self.margin_steps is None:
+            return f'> {1e3 * self.max_steps * self.control_dt:g} ms'
+        return f'{1e3 * self.margin_steps * self.control_dt:g} ms ({self.tried[self.margin_steps]})'
+
+
+def delay_margin(flight: Flight, undelayed: Outcome | None = None, max_delay: float = MAX_DELAY) -> DelayMargin:
+    """The smallest transport delay (whole control steps in 0..``max_delay`` [s]) at which ``flight``
+    is :func:`unstable`, by bisection; ``undelayed`` is the flight without delay (flown if None)."""
+    control_dt = factory.control_period(gains_for(flight.control_rate))
+    undelayed = undelayed if undelayed is not None else fly(replace(flight, delay_steps=0))
+    max_steps = int(round(max_delay / control_dt))
+    tried = {}
+
+    def is_unstable(steps: int) -> bool:
+        tried[steps] = instability(fly(replace(flight, delay_steps=steps)), undelayed)
+        return tried[steps] is not None
+
+    if not is_unstable(max_steps):
+        return DelayMargin(control_dt, None, max_steps, tried)
+    stable, failing = 0, max_steps          # invariant: stable is stable, failing is unstable
+    while failing - stable > 1:
+        middle = (stable + failing) // 2
+        if is_unstable(middle):
+            failing = middle
+        else:
+            stable = middle
+    return DelayMargin(control_dt, failing, max_steps, tried)
+
+
+def monotone(instabilities: dict) -> bool:
+    """Whether {delay [steps]: instability or None} never has a stable delay above an unstable one."""
+    verdicts = [instabilities[steps] is not None for steps in sorted(instabilities)]
+    return all(not (earlier and not later) for earlier, later in zip(verdicts, verdicts[1:]))
+
+
+def _delay_margin_task(task):
+    return delay_margin(*task)
+
+
+def run_all(function, tasks: list, jobs: int) -> list:
+    """``[function(t) for t in tasks]``, ``jobs`` at a time in worker processes when jobs > 1."""
+    if jobs <= 1 or len(tasks) <= 1:
+        return [function(task) for task in tasks]
+    method = 'fork' if 'fork' in multiprocessing.get_all_start_methods() else None
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context(method)) as pool:
+        return list(pool.map(function, tasks))
+
+
+# --- tables ------------------------------------------------------------------------------------------
+
+def number(value: float) -> str:
+    """Four significant digits (a table cell)."""
+    return 'nan' if math.isnan(value) else f'{value:.4g}'
+
+
+def failure_note(outcome: Outcome) -> str:
+    return '' if outcome.failure is None else f'failed: {outcome.failure} at {outcome.failure_time:.2f} s'
+
+
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
+    """A Markdown table: names and notes left-aligned, numbers right-aligned."""
+    align = ['---' if name == 'controller' or name.startswith('note') else '---:' for name in header]
+    return ['| ' + ' | '.join(header) + ' |', '|' + '|'.join(align) + '|'] + ['| ' + ' | '.join(r) + ' |' for r in rows]
+
+
+def scenario_label(scenario: str, duration: float | None) -> str:
+    return scenario if duration is None else f'{scenario}, {duration:g} s'
+
+
+def nominal_table(controllers, scenario, duration, flown) -> list[str]:
+    rows = []
+    for kind in controllers:
+        o = flown[Flight(kind, scenario, duration)]
+        m = o.metrics
+        rows.append([kind, number(o.rmse_cm), number(100.0 * m['max_position_error_m']),
+                     *(number(m['chattering'][c]) for c in CONTROLS), number(o.total_chattering),
+                     number(m['saturation_fraction']), failure_note(o)])
+    return [f'### Nominal flight ({scenario_label(scenario, duration)}, section IV disturbances)', ''] + table(
+        ['controller', 'RMSE [cm]', 'max error [cm]', 'TV(U1) [N/s]', 'TV(U2) [N/s]', 'TV(U3) [N/s]',
+         'TV(U4) [N m/s]', 'TV total', 'saturation', 'note'], rows)
+
+
+def delay_steps_of(seconds: float, control_rate: float | None = None) -> int:
+    return TransportDelay.from_seconds(seconds, factory.control_period(gains_for(control_rate))).steps
+
+
+def delay_table(controllers, scenario, duration, flown, margins) -> list[str]:
+    row_steps = delay_steps_of(DELAY_ROW)
+    rows = []
+    for kind in controllers:
+        base, delayed = flown[Flight(kind, scenario, duration)], flown[Flight(kind, scenario, duration, row_steps)]
+        known = {**margins[kind].tried, 0: None, row_steps: instability(delayed, base)}
+        rows.append([kind, margins[kind].text + ('' if monotone(known) else ' (not monotone)'),
+                     number(base.rmse_cm), number(delayed.rmse_cm),
+                     number(base.tail_chattering['U2']), number(delayed.tail_chattering['U2']),
+                     number(base.tail_chattering['U3']), number(delayed.tail_chattering['U3']),
+                     failure_note(delayed)])
+    ms = f'{1e3 * DELAY_ROW:g} ms'
+    return [f'### Transport delay ({scenario_label(scenario, duration)})', ''] + table(
+        ['controller', 'delay margin', 'RMSE [cm] no delay', f'RMSE [cm] {ms}', 'TV(U2) [N/s] no delay',
+         f'TV(U2) {ms}', 'TV(U3) [N/s] no delay', f'TV(U3) {ms}', f'note ({ms})'], rows) + [
+        '', f'Delay margin: smallest delay (bisection over 0..{1e3 * MAX_DELAY:g} ms in control steps) at which the '
+        f'flight fails or TV(U2) + TV(U3) over its last {TAIL:g} s or its RMSE exceeds {INSTABILITY_FACTOR:g}x '
+        f'the no-delay value (bench/paper_tables.py); "not monotone": a flight flown here with a longer delay than '
+        'an unstable one was stable, so the bisection may have missed a smaller unstable delay. TV columns: '
+        f'the last {TAIL:g} s of the flight (its settled part if that is shorter).']
+
+
+def rate_table(controllers, scenario, duration, rates, flown) -> list[str]:
+    rows = []
+    for kind in controllers:
+        outcomes = [flown[Flight(kind, scenario, duration, control_rate=rate)] for rate in rates]
+        first = outcomes[0].rmse_cm
+        rows.append([kind, *(number(o.rmse_cm) for o in outcomes), *(number(o.rmse_cm / first) for o in outcomes[1:]),
+                     '; '.join(f'{rate:g} Hz {failure_note(o)}' for rate, o in zip(rates, outcomes) if o.failure)])
+    return [f'### Control rate ({scenario_label(scenario, duration)}, the same gains file)', ''] + table(
+        ['controller', *(f'RMSE [cm] {r:g} Hz' for r in rates), *(f'ratio {r:g}/{rates[0]:g} Hz' for r in rates[1:]),
+         'note'], rows)
+
+
+def noise_table(controllers, scenario, duration, flown) -> list[str]:
+    reference = flown[Flight(CHATTERING_REFERENCE, scenario, duration)].total_chattering
+    rows = []
+    for kind in controllers:
+        o = flown[Flight(kind, scenario, duration, noise=True)]
+        rows.append([kind, number(o.rmse_cm), number(o.total_chattering), number(o.total_chattering / reference),
+                     failure_note(o)])
+    return [f'### Sensor noise ({scenario_label(scenario, duration)}; position 1 cm, velocity 2 cm/s, '
+            'attitude 0.01 rad, body rate 0.02 rad/s)', ''] + table(
+        ['controller', 'RMSE [cm]', 'TV total [N/s]', f'TV total / {CHATTERING_REFERENCE} without noise', 'note'],
+        rows) + ['', f'{CHATTERING_REFERENCE} without noise: TV total {number(reference)} N/s '
+                     '(TV total: TV(U1) + TV(U2) + TV(U3) + TV(U4) per second of settled flight).']
+
+
+def flights_needed(experiment: str, controllers, scenario, duration, rates) -> list[Flight]:
+    """The plain flights (no bisection) an experiment's table reads."""
+    base = [Flight(kind, scenario, duration) for kind in controllers]
+    if experiment == 'nominal':
+        return base
+    if experiment == 'delay':
+        return base + [Flight(kind, scenario, duration, delay_steps_of(DELAY_ROW)) for kind in controllers]
+    if experiment == 'rate':
+        return [Flight(kind, scenario, duration, control_rate=rate) for kind in controllers for rate in rates]
+    return [Flight(CHATTERING_REFERENCE, scenario, duration)] + [
+        Flight(kind, scenario, duration, noise=True) for kind in controllers]
+
+
+def paper_tables(experiments, controllers, scenarios: dict, duration: float | None, rates, jobs: int = 1) -> list[str]:
+    """The Markdown lines of the chosen experiments' tables. ``scenarios``: experiment -> scenario names."""
+    skipped, plan = [], []
+    for experiment in experiments:
+        for scenario in scenarios[experiment]:
+            if scenario not in trajectories.SCENARIOS:
+                skipped.append((experiment, scenario))
+            else:
+                plan.append((experiment, scenario))
+    needed = list(dict.fromkeys(f for experiment, scenario in plan
+                                for f in flights_needed(experiment, controllers, scenario, duration, rates)))
+    flown = dict(zip(needed, run_all(fly, needed, jobs)))
+    margin_tasks = [(Flight(kind, scenario, duration), flown[Flight(kind, scenario, duration)])
+                    for experiment, scenario in plan if experiment == 'delay' for kind in controllers]
+    margins = {(task[0].controller, task[0].scenario): margin
+               for task, margin in zip(margin_tasks, run_all(_delay_margin_task, margin_tasks, jobs))}
+    out = []
+    for experiment, scenario in plan:
+        if experiment == 'nominal':
+            out += nominal_table(controllers, scenario, duration, flown)
+        elif experiment == 'delay':
+            out += delay_table(controllers, scenario, duration, flown,
+                               {kind: margins[kind, scenario] for kind in controllers})
+        elif experiment == 'rate':
+            out += rate_table(controllers, scenario, duration, rates, flown)
+        else:
+            out += noise_table(controllers, scenario, duration, flown)
+        out.append('')
+    for experiment, scenario in skipped:
+        out += [f'Note: {experiment} on {scenario!r} skipped: not a known scenario '
+                f'(known: {", ".join(trajectories.SCENARIOS)}).', '']
+    return out
+
+
+def names(text: str) -> list[str]:
+    return [name.strip() for name in text.split(',') if name.strip()]
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--experiments', default=','.join(EXPERIMENTS), help=f'comma-separated of {", ".join(EXPERIMENTS)}')
+    parser.add_argument('--controllers', help='comma-separated controller kinds (default: every kind)')
+    parser.add_argument('--scenarios', help='comma-separated scenario names for every chosen experiment '
+                                            '(default: paper; paper,lemniscate for noise)')
+    parser.add_argument('--duration', type=float, help='[s] every flight this long (default: the scenario length)')
+    parser.add_argument('--rates', default=','.join(f'{r:g}' for r in DEFAULT_RATES), help='[Hz] control rates')
+    parser.add_argument('--jobs', type=int, default=1, help='flights at a time (process pool; default 1)')
+    parser.add_argument('--out', type=Path, help='also write the tables to this file')
+    args = parser.parse_args(argv)
+    experiments = names(args.experiments)
+    unknown = [e for e in experiments if e not in EXPERIMENTS]
+    controllers = names(args.controllers) if args.controllers else list(factory.CONTROLLERS)
+    unknown += [c for c in controllers if c not in factory.CONTROLLERS]
+    if unknown:
+        parser.error(f'unknown experiment or controller: {", ".join(unknown)} '
+                     f'(experiments: {", ".join(EXPERIMENTS)}; controllers: {", ".join(factory.CONTROLLERS)})')
+    if args.duration is not None and not args.duration > 0.0:
+        parser.error('--duration must be positive')
+    scenarios = {e: tuple(names(args.scenarios)) if args.scenarios else DEFAULT_SCENARIOS[e] for e in experiments}
+    rates = [float(r) for r in names(args.rates)]
+    text = '\n'.join(paper_tables(experiments, controllers, scenarios, args.duration, rates, max(1, args.jobs)))
+    print(text)
+    if args.out is not None:
+        args.out.write_text(text + '\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
