@@ -49,30 +49,43 @@ def clip_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
 
 
 def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
-    """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m], thrust first, yaw last.
+    """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m]: thrust first, then roll and pitch, yaw last.
+
+    With the mean thrust m = U1/4, the half torques h_r = U2/2, h_p = U3/2 and the yaw shift
+    y = U4/(4 c) (c = yaw_coefficient [m]; y moves thrust from rotors 1, 3 to rotors 2, 4), eq. (2)
+    inverted reads F1 = m - h_p - y, F2 = m - h_r + y, F3 = m + h_p - y, F4 = m + h_r + y.
 
     1. U1 is clipped to [4 f_min, 4 f_max] (what four rotors can give); it is then realised exactly.
-    2. U2 and U3 are scaled down by one common factor (the direction of the roll/pitch torque is
-       kept) until every rotor fits: |U2| / 2 and |U3| / 2 within the room h = min(U1/4 - f_min,
-       f_max - U1/4) left around the mean thrust U1/4.
-    3. U4, which moves U4/(4 c) from rotors 1, 3 to rotors 2, 4 (c = yaw_coefficient [m]), is
-       clipped to the room the first two steps leave.
+    2. U2 and U3 are scaled by the largest common factor s in [0, 1] (the direction of the roll/pitch
+       torque is kept) for which some yaw shift between 0 and the demanded one keeps every rotor in
+       [f_min, f_max]: yaw may be cut, even to nothing, for roll and pitch, but never reversed.
+    3. The yaw shift is the demanded one clipped to what then fits.
 
-    So the realised U1 is the commanded one within the rotor limits, roll and pitch are served
-    before yaw, and inside the limits the result is the exact inverse of eq. (2). Floats or arrays
+    So U1 is never given away for a torque, U4 is never larger than asked nor of the other sign,
+    and a demand that fits is realised exactly (the inverse of eq. 2). Floats or arrays
     (elementwise, one element per vehicle).
     """
     xp = namespace_for(u1, u2, u3, u4)
-    u1 = xp.clip(u1, 4.0 * f_min, 4.0 * f_max)
-    mean = 0.25 * u1
-    room = xp.minimum(mean - f_min, f_max - mean)
-    largest = 0.5 * xp.maximum(xp.abs(u2), xp.abs(u3))
-    scale = xp.minimum(1.0, room / xp.maximum(largest, 1e-12))    # exactly 1 wherever everything fits
+    mean = 0.25 * xp.clip(u1, 4.0 * f_min, 4.0 * f_max)
+    below, above = mean - f_min, f_max - mean                 # room of the mean thrust, >= 0
+    yaw = 0.25 * u4 / yaw_coefficient
+    low, high = xp.minimum(yaw, 0.0), xp.maximum(yaw, 0.0)   # the yaw shifts allowed: between 0 and the demand
+    pitch, roll = 0.5 * xp.abs(u3), 0.5 * xp.abs(u2)
+
+    def most(room, size):
+        """Largest s with s size <= room (room >= 0), at most 1."""
+        return xp.minimum(1.0, room / xp.maximum(xp.maximum(size, room), 1e-300))
+
+    # every rotor in range for some shift in [low, high]: the lower bounds of the shift (rotors 1, 3 below
+    # f_max; 2, 4 above f_min) below its upper bounds (1, 3 above f_min; 2, 4 below f_max) and the demand range
+    scale = most(f_max - f_min, 2.0 * pitch)
+    for room, size in ((f_max - f_min, 2.0 * roll), (2.0 * above, pitch + roll), (2.0 * below, pitch + roll),
+                       (above + high, pitch), (below + high, roll), (below - low, pitch), (above - low, roll)):
+        scale = xp.minimum(scale, most(room, size))
     half_roll, half_pitch = 0.5 * scale * u2, 0.5 * scale * u3
-    yaw_up = xp.minimum(mean - xp.abs(half_pitch) - f_min, f_max - mean - xp.abs(half_roll))
-    yaw_down = xp.minimum(f_max - mean - xp.abs(half_pitch), mean - xp.abs(half_roll) - f_min)
-    yaw = xp.clip(0.25 * u4 / yaw_coefficient, -yaw_down, yaw_up)   # thrust moved from rotors 1, 3 to 2, 4
-    forces = (mean - half_pitch - yaw, mean - half_roll + yaw, mean + half_pitch - yaw, mean + half_roll + yaw)
+    shift = xp.clip(yaw, xp.maximum(scale * pitch - above, scale * roll - below),
+                    xp.minimum(below - scale * pitch, above - scale * roll))
+    forces = (mean - half_pitch - shift, mean - half_roll + shift, mean + half_pitch - shift, mean + half_roll + shift)
     return saturate_forces(forces, f_min, f_max)   # removes rounding only (1e-16 N)
 
 
