@@ -80,7 +80,8 @@ def bounds(params, disturbances, spec):
     weight_heavy = m_heavy * params.g
     sigma = (low_altitude_scales(spec.turbulence, DEFAULT_ALTITUDE)
              if spec.turbulence != 'none' else (0.0, 0.0, 0.0))
-    wind_h = params.wind_drag * (spec.wind_mean_speed_mps + GUST_SIGMAS * sigma[0] + HELIX_SPEED[0]) if spec.has_wind else 0.0
+    wind_h = (params.wind_drag * (spec.wind_mean_speed_mps + GUST_SIGMAS * sigma[0] + HELIX_SPEED[0])
+              if spec.has_wind else 0.0)
     wind_v = params.wind_drag * (GUST_SIGMAS * sigma[2] + HELIX_SPEED[1]) if spec.has_wind else 0.0
     section4 = {name: abs(getattr(disturbances, name).bias) + abs(getattr(disturbances, name).amplitude)
                 for name in ('A_x', 'A_y', 'A_z', 'A_phi', 'A_theta', 'A_psi')}

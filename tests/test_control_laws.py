@@ -17,7 +17,7 @@ import pytest
 from flight_stack.embedded import fly_embedded
 from nnit2fsmc_controller.axis_laws import IntegralSlidingModeLaw, PIDLaw
 from nnit2fsmc_controller.controller import AXES
-from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, load_gains
+from nnit2fsmc_controller.factory import CONTROLLERS, GAIN_CHOICES, build_controller, flatten_gains, load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from nnit2fsmc_controller.tuning import retune
 from quad_msgs_bridge.mixer import controls_from_forces
@@ -345,3 +345,11 @@ def test_allocation_changes_in_flight_and_the_integrals_are_kept():
     assert [law.integral for law in retuned.laws.values()] == [law.integral for law in running.laws.values()]
     out = retuned.update(0.03, STATE, REFERENCE)
     np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, VEHICLE.yaw_coefficient), atol=1e-15)
+
+
+def test_every_text_gain_has_its_valid_values_for_the_ros_node():
+    """The controller node declares each text gain with the choices of factory.GAIN_CHOICES."""
+    text = {name: value for name, value in flatten_gains(GAINS).items() if isinstance(value, str)}
+    assert 'common.allocation' in text
+    for name, value in text.items():
+        assert value in GAIN_CHOICES[name.rsplit('.', 1)[-1]], name

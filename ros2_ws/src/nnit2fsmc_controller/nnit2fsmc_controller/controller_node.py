@@ -32,7 +32,8 @@ from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.timebase import nanoseconds, seconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
-from .factory import CONTROLLERS, build_controller, flatten_gains, gain_description, load_gains, unflatten_gains
+from .factory import (CONTROLLERS, GAIN_CHOICES, build_controller, flatten_gains, gain_description, load_gains,
+                      unflatten_gains)
 from .trajectory import Waypoints
 
 _UNBOUNDED = (0.0, math.inf)
@@ -55,7 +56,8 @@ class ControllerNode(Node):
         gains = {}
         for name, default in flatten_gains(load_gains(gains_file or None)).items():
             if isinstance(default, str):
-                gains[name] = declare(self, name, default, gain_description(name), choices=('km', 'nie-tan'))
+                gains[name] = declare(self, name, default, gain_description(name),
+                                      choices=GAIN_CHOICES[name.rsplit('.', 1)[-1]])
             else:
                 gains[name] = declare(self, name, default, gain_description(name),
                                       (0, 2 ** 31 - 1) if isinstance(default, int) else _UNBOUNDED)

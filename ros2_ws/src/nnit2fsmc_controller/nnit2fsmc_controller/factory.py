@@ -6,11 +6,12 @@ from typing import Any, Mapping
 
 import yaml
 
+from quad_msgs_bridge.mixer import ALLOCATIONS
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
 from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
 from .controller import AXES, CascadedController
-from .it2_fuzzy import IT2FuzzyCorrector
+from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector
 from .neural_network import EquivalentControlNetwork
 from .se3 import SE3Controller
 
@@ -189,6 +190,10 @@ GAIN_DESCRIPTIONS = {
     'k_rate': 'se3 angular or linear velocity error gain, divided by J or m [1/s]',
     'k_integral': 'se3 integral gain, divided by J or m [1/s^3]',
 }
+
+
+#: the valid values of each text gain, by the last component of its name
+GAIN_CHOICES = {'type_reducer': TYPE_REDUCERS, 'allocation': ALLOCATIONS}
 
 
 def gain_description(name: str) -> str:
