@@ -23,7 +23,7 @@ from nnit2fsmc_controller.tuning import retune
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.review.metrics import flight_metrics
-from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 PAPER_VEHICLE, DISTURBANCES = load_vehicle_file()
 VEHICLE = dataclasses.replace(PAPER_VEHICLE, Ix=3.1e-3, Iy=4.7e-3, Iz=8.3e-3, Kfx=2.1e-3, Kfy=3.7e-3, Kfz=5.3e-3,
@@ -353,3 +353,21 @@ def test_every_text_gain_has_its_valid_values_for_the_ros_node():
     assert 'common.allocation' in text
     for name, value in text.items():
         assert value in GAIN_CHOICES[name.rsplit('.', 1)[-1]], name
+
+
+@pytest.mark.parametrize('kind, section, key, value', [
+    ('pid', 'common', 'allocation', 'scale'),
+    ('se3', 'common', 'allocation', 'scale'),
+    ('se3', 'se3.axes.theta', 'k_rate', -1.0),
+    ('se3', 'se3.axes.z', 'integral_limit', math.inf),
+    ('smc-integral', 'smc_integral.axes.psi', 'slope', 0.0),
+    ('smc-integral', 'smc_integral.axes.x', 'gain_uncertainty', -0.1),
+])
+def test_invalid_baseline_gains_are_named(kind, section, key, value):
+    gains = copy.deepcopy(GAINS)
+    node = gains
+    for part in section.split('.'):
+        node = node[part]
+    node[key] = value
+    with pytest.raises(ParameterError, match=f'{section}.{key}'.replace('.', r'\.')):
+        build_controller(kind, VEHICLE, gains)
