@@ -32,7 +32,8 @@ from quad_msgs_bridge.reference import ReferenceSample as Reference, hold
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
 
 __all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'ParameterError', 'Reference',
-           'SE3Controller', 'VehicleParams', 'fly', 'hold', 'load_gains', 'load_vehicle', 'make_controller', 'run_campaign']
+           'SE3Controller', 'VehicleParams', 'fly', 'hold', 'load_gains', 'load_vehicle', 'make_controller',
+           'run_campaign']
 
 
 def load_vehicle(path: str | Path | None = None) -> VehicleParams:
