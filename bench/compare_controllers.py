@@ -37,7 +37,8 @@ MAX_RMSE_M, MAX_ERROR_M, MIN_TV_RATIO, MAX_RMSE_RATIO = 0.05, 0.15, 10.0, 1.2
 
 def fly_case(case):
     """(controller, disturbances on?, duration [s], settle [s], physics rate [Hz], allocation, true mass / nominal)
-    -> (case, metrics, wall [s])."""
+    -> (case, metrics, wall [s]); metrics are None for a flight that failed (FailureRules) before it settled,
+    and name the failure of one that failed later (``failure``: None or 'reason at t s')."""
     kind, disturbed, duration, settle, physics_rate, allocation, mass_factor = case
     params, disturbances = load_vehicle_file()
     gains = load_gains()
@@ -46,7 +47,11 @@ def fly_case(case):
     result = fly_embedded(kind, make_scenario('paper', duration), params, disturbances.switched(disturbed),
                           gains, duration, physics_rate, perturbations=Perturbations(true_vehicle=true_vehicle))
     record = result.record
+    failure = None if result.failure is None else f'{result.failure} at {result.failure_time_s:.2f} s'
+    if result.failure is not None and result.failure_time_s <= settle:
+        return case, {'failure': failure}, result.wall_time_s
     metrics = flight_metrics(record, settle, params.F_min, params.F_max)
+    metrics['failure'] = failure
     metrics['forces_within_limits'] = bool(record.forces.min() >= params.F_min
                                            and record.forces.max() <= params.F_max)
     return case, metrics, result.wall_time_s
@@ -59,11 +64,16 @@ def main_table(results, disturbed: bool) -> list[str]:
              '|---|---:|---:|---:|---:|---:|---:|---:|---:|---|']
     for kind in CONTROLLERS:
         m = results[(kind, disturbed)]
+        if 'rmse_position_m' not in m:
+            lines.append(f'| {kind} | FAILED: {m["failure"]} | | | | | | | | |')
+            continue
         tv = ' | '.join(f'{m["chattering"][c]:.3g}' for c in CONTROLS)
         if kind == 'nnit2fsmc':
             share = ' '.join(f'{m["fuzzy_share"][s][0]:.2f}->{m["fuzzy_share"][s][-1]:.2f}' for s in SUBSYSTEMS)
         else:
             share = '(no fuzzy term)'
+        if m['failure']:
+            share += f' FAILED: {m["failure"]}'
         lines.append(f'| {kind} | {m["rmse_position_m"] * 100:.3f} | {m["max_position_error_m"] * 100:.3f} '
                      f'| {m["rmse_yaw_rad"] * 1e3:.3f} | {tv} | {m["saturation_fraction"] * 100:.2f} | {share} |')
     return lines
@@ -77,6 +87,10 @@ def claim_lines(results) -> tuple[list[str], bool]:
     holds = {}
     for disturbed in (True, False):
         nn, sign = results[('nnit2fsmc', disturbed)], results[('smc-sign', disturbed)]
+        if 'rmse_position_m' not in nn or 'rmse_position_m' not in sign:
+            holds[disturbed] = False
+            lines.append(f'| {"on" if disturbed else "off"} | n/a (a flight failed before settling) | | | | | NO |')
+            continue
         ratios = [sign['chattering'][c] / nn['chattering'][c] for c in CONTROLS]
         rmse_ratio = nn['rmse_position_m'] / sign['rmse_position_m']
         holds[disturbed] = min(ratios) >= MIN_TV_RATIO and rmse_ratio <= MAX_RMSE_RATIO
@@ -90,6 +104,8 @@ def claim_lines(results) -> tuple[list[str], bool]:
 
 def acceptance_lines(results) -> tuple[list[str], bool]:
     m = results[('nnit2fsmc', True)]
+    if 'rmse_position_m' not in m:
+        return ['### Issue 2 acceptance, NNIT2FSMC with disturbances', '', f'FAIL: {m["failure"]}'], False
     shares = m['fuzzy_share']
     checks = [
         (f'position RMSE after settling < {MAX_RMSE_M * 100:g} cm', m['rmse_position_m'] < MAX_RMSE_M,
