@@ -104,59 +104,52 @@ def bounds(params, disturbances, spec):
     return r_min, r_max, {axis: (sum(terms[axis].values()) / divisor[axis], terms[axis]) for axis in AXES}
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--gains', type=Path, default=None, help='NNIT2FSMC gains file (default: the packaged one)')
-    parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle file (default: the packaged one)')
-    parser.add_argument('--campaign', type=Path, default=ROOT / 'campaigns' / 'paper-robustness.yaml')
-    args = parser.parse_args(argv)
-    gains = load_gains(args.gains)
-    params, disturbances = load_vehicle_file(args.vehicle)
-    spec = load_spec(args.campaign)
+def derive(gains, params, disturbances, spec):
+    """(table rows, {'pid': ..., 'smc_integral': ..., 'se3': ...}): the gains sections of steps 1-5,
+    each {axis: {key: value}} as in controller.yaml."""
     slope = fuzzy_slope(gains)
     gains_of = matched(gains, params, slope)
     r_min, r_max, bound = bounds(params, disturbances, spec)
     delta = max(1.0 / r_min - 1.0, 1.0 - 1.0 / r_max)
-    print(f'IT2 least-squares slope: {slope:.4f} x fuzzy_gain / input_scale')
-    print(f'gain ratio r = true/nominal in [{r_min:.4f}, {r_max:.4f}], gain_uncertainty = {delta:.4f}\n')
-    print('| axis | k [1/s] | kp | kd | ki | model error terms [N or N m] | F [q\'\' units] | switching_gain | '
-          'u_eq at hover | integral_limit |')
-    print('|---|---:|---:|---:|---:|---|---:|---:|---:|---:|')
-    rows = {}
+    rows, sections = [], {'pid': {}, 'smc_integral': {}, 'se3': {}}
     for axis in AXES:
         k, kp, kd, ki = gains_of[axis]
         f, terms = bound[axis]
         switching = (1.0 + MARGIN) * f / r_min
         hover = params.g if axis == 'z' else 0.0
         limit = (switching + delta * hover) / ki
-        rows[axis] = dict(k=k, kp=kp, kd=kd, ki=ki, switching=switching, limit=limit,
-                          mu=gains['common']['lambda'][axis] ** 2 / 4.0)
+        mu = gains['common']['lambda'][axis] ** 2 / 4.0
+        sections['pid'][axis] = {'kp': kp, 'ki': ki, 'kd': kd, 'integral_limit': limit}
+        sections['smc_integral'][axis] = {'slope': k, 'integral_gain': mu, 'switching_gain': switching,
+                                          'gain_uncertainty': delta, 'integral_limit': limit}
+        sections['se3'][axis] = {'k_error': kp, 'k_rate': kd, 'k_integral': ki, 'integral_limit': limit}
+        rows.append((axis, k, kp, kd, ki, terms, f, switching, hover, limit))
+    return (slope, r_min, r_max, delta, rows), sections
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--gains', type=Path, default=None, help='NNIT2FSMC gains file (default: the packaged one)')
+    parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle file (default: the packaged one)')
+    parser.add_argument('--campaign', type=Path, default=ROOT / 'campaigns' / 'paper-robustness.yaml')
+    args = parser.parse_args(argv)
+    params, disturbances = load_vehicle_file(args.vehicle)
+    (slope, r_min, r_max, delta, rows), sections = derive(load_gains(args.gains), params, disturbances,
+                                                          load_spec(args.campaign))
+    print(f'IT2 least-squares slope: {slope:.4f} x fuzzy_gain / input_scale')
+    print(f'gain ratio r = true/nominal in [{r_min:.4f}, {r_max:.4f}], gain_uncertainty = {delta:.4f}\n')
+    print('| axis | k [1/s] | kp | kd | ki | model error terms [N or N m] | F [q\'\' units] | switching_gain | '
+          'u_eq at hover | integral_limit |')
+    print('|---|---:|---:|---:|---:|---|---:|---:|---:|---:|')
+    for axis, k, kp, kd, ki, terms, f, switching, hover, limit in rows:
         parts = ', '.join(f'{name} {value:.4g}' for name, value in terms.items())
         print(f'| {axis} | {k:.4g} | {kp:.4g} | {kd:.4g} | {ki:.4g} | {parts} | {f:.4g} | {switching:.4g} | '
               f'{hover:.4g} | {limit:.4g} |')
-
-    def fmt(value):
-        return f'{value:.4g}'
-
-    print('\n    pid:')
-    print('      axes:')
-    for axis in AXES:
-        r = rows[axis]
-        print(f'        {axis + ":":6} {{kp: {fmt(r["kp"])}, ki: {fmt(r["ki"])}, kd: {fmt(r["kd"])}, '
-              f'integral_limit: {fmt(r["limit"])}}}')
-    print('\n    smc_integral:')
-    print('      axes:')
-    for axis in AXES:
-        r = rows[axis]
-        print(f'        {axis + ":":6} {{slope: {fmt(r["k"])}, integral_gain: {fmt(r["mu"])}, '
-              f'switching_gain: {fmt(r["switching"])}, gain_uncertainty: {fmt(delta)}, '
-              f'integral_limit: {fmt(r["limit"])}}}')
-    print('\n    se3:')
-    print('      axes:')
-    for axis in AXES:
-        r = rows[axis]
-        print(f'        {axis + ":":6} {{k_error: {fmt(r["kp"])}, k_rate: {fmt(r["kd"])}, k_integral: {fmt(r["ki"])}, '
-              f'integral_limit: {fmt(r["limit"])}}}')
+    for section, per_axis in sections.items():
+        print(f'\n    {section}:\n      axes:')
+        for axis, values in per_axis.items():
+            text = ', '.join(f'{key}: {value:.4g}' for key, value in values.items())
+            print(f'        {axis + ":":6} {{{text}}}')
     return 0
 
 
