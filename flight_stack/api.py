@@ -26,12 +26,14 @@ from typing import Any, Mapping
 
 from nnit2fsmc_controller.controller import CascadedController, ControlOutput
 from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, load_gains
+from nnit2fsmc_controller.se3 import SE3Controller
 from nnit2fsmc_controller.trajectory import SCENARIOS
 from quad_msgs_bridge.reference import ReferenceSample as Reference, hold
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
 
 __all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'ParameterError', 'Reference',
-           'VehicleParams', 'fly', 'hold', 'load_gains', 'load_vehicle', 'make_controller', 'run_campaign']
+           'SE3Controller', 'VehicleParams', 'fly', 'hold', 'load_gains', 'load_vehicle', 'make_controller',
+           'run_campaign']
 
 
 def load_vehicle(path: str | Path | None = None) -> VehicleParams:
@@ -40,7 +42,8 @@ def load_vehicle(path: str | Path | None = None) -> VehicleParams:
 
 
 def make_controller(kind: str = 'nnit2fsmc', vehicle: VehicleParams | str | Path | None = None,
-                    gains: Mapping[str, Any] | str | Path | None = None, batch: int | None = None) -> CascadedController:
+                    gains: Mapping[str, Any] | str | Path | None = None,
+                    batch: int | None = None) -> CascadedController | SE3Controller:
     """A fresh controller of ``kind`` (one of CONTROLLERS) for the nominal ``vehicle`` (a VehicleParams
     or a vehicle YAML; None: the packaged one) with ``gains`` (a gains mapping or YAML; None: the
     packaged ones). Raises ParameterError naming an invalid value."""

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from quad_msgs_bridge.mixer import controls_from_forces, forces_from_controls, saturate_forces
+from quad_msgs_bridge.mixer import (ALLOCATIONS, allocate, clip_allocation, controls_from_forces, forces_from_controls,
+                                     priority_allocation, saturate_forces)
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 PARAMS, _ = load_vehicle_file()
@@ -64,3 +65,84 @@ def test_functions_work_elementwise_on_arrays():
 def test_saturation_clips_each_rotor():
     assert saturate_forces((-1.0, 0.5, 3.0, F_MAX), F_MIN, F_MAX) == (F_MIN, 0.5, F_MAX, F_MAX)
 
+
+
+# ---------------------------------------------------------------- allocation within the rotor limits
+def realised(forces):
+    return np.array(controls_from_forces(*forces, C))
+
+
+def test_a_saturating_yaw_demand_does_not_starve_lift():
+    """Issue finding 7: at mass +30 % a yaw demand clipped two rotors to F_min and U1 fell below the weight.
+    Priority allocation keeps U1 and the roll/pitch torques, and gives yaw what is left."""
+    weight = 1.3 * PARAMS.m * PARAMS.g                      # 6.2 N of the 10.7 N the rotors can give
+    demand = (weight, 0.3, -0.2, -0.2)                      # -0.2 N m: far beyond the yaw authority
+    clipped = realised(clip_allocation(*demand, C, F_MIN, F_MAX))
+    assert clipped[0] < weight - 0.5                        # the hazard: per-rotor clipping loses lift
+    forces = priority_allocation(*demand, C, F_MIN, F_MAX)
+    u1, u2, u3, u4 = realised(forces)
+    assert all(F_MIN <= f <= F_MAX for f in forces)
+    assert u1 == pytest.approx(weight, abs=1e-12)
+    assert (u2, u3) == pytest.approx((0.3, -0.2), abs=1e-12)
+    assert -0.2 < u4 < 0.0                                  # yaw reduced, same direction
+    assert min(forces) == pytest.approx(F_MIN, abs=1e-12) or max(forces) == pytest.approx(F_MAX, abs=1e-12)
+
+
+def test_a_saturating_roll_demand_is_scaled_with_pitch_and_yaw_goes_first():
+    weight = PARAMS.m * PARAMS.g
+    room = 2.0 * min(weight / 4 - F_MIN, F_MAX - weight / 4)    # largest |U2| that fits at this U1 without yaw
+    forces = priority_allocation(weight, 3.0 * room, 0.5 * room, 0.0, C, F_MIN, F_MAX)
+    u1, u2, u3, u4 = realised(forces)
+    assert u1 == pytest.approx(weight, abs=1e-12)
+    assert (u2, u3) == pytest.approx((room, room / 6.0), abs=1e-12)   # one factor: the torque direction kept
+    assert u4 == pytest.approx(0.0, abs=1e-15)                       # no yaw asked, none made
+    # with a yaw demand, roll and pitch take what yaw can leave them: more roll, less yaw than asked
+    forces = priority_allocation(weight, 3.0 * room, 0.5 * room, 0.01, C, F_MIN, F_MAX)
+    u1, u2, u3, u4 = realised(forces)
+    assert u1 == pytest.approx(weight, abs=1e-12)
+    assert room < u2 < 3.0 * room and u3 == pytest.approx(u2 / 6.0, abs=1e-12)
+    assert 0.0 <= u4 < 0.01
+    # roll fits alone but not with the whole yaw: roll is served in full, yaw cut
+    forces = priority_allocation(weight, 0.8 * room, 0.0, 0.05, C, F_MIN, F_MAX)
+    u1, u2, u3, u4 = realised(forces)
+    assert (u1, u2, u3) == pytest.approx((weight, 0.8 * room, 0.0), abs=1e-12)
+    assert 0.0 < u4 < 0.05
+
+
+def test_collective_beyond_the_rotors_is_clipped():
+    assert priority_allocation(20.0, 0.1, 0.1, 0.001, C, F_MIN, F_MAX) == (F_MAX,) * 4
+    assert priority_allocation(-1.0, 0.1, -0.1, 0.001, C, F_MIN, F_MAX) == (F_MIN,) * 4
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_priority_allocation_properties(seed):
+    """For any demand: rotor limits hold; U1 is the demand clipped to [4 F_min, 4 F_max]; (U2, U3) is the
+    demand times one factor in [0, 1]; U4 has the demand's sign and at most its size; a demand that
+    fits is realised exactly (the inverse of eq. 2)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(200):
+        demand = (rng.uniform(-2.0, 13.0), *rng.normal(0.0, 1.5, 2), rng.normal(0.0, 0.03))
+        forces = priority_allocation(*demand, C, F_MIN, F_MAX)
+        u1, u2, u3, u4 = realised(forces)
+        assert all(F_MIN <= f <= F_MAX for f in forces)
+        assert u1 == pytest.approx(min(max(demand[0], 4 * F_MIN), 4 * F_MAX), abs=1e-12)
+        factor = u2 / demand[1]
+        assert -1e-12 <= factor <= 1 + 1e-12 and u3 == pytest.approx(factor * demand[2], abs=1e-12)
+        assert u4 * demand[3] >= -1e-15 and abs(u4) <= abs(demand[3]) + 1e-15
+        if 0.0 < factor < 1.0 - 1e-9:      # roll/pitch cut: some rotor is at a limit
+            assert min(forces) == pytest.approx(F_MIN, abs=1e-12) or max(forces) == pytest.approx(F_MAX, abs=1e-12)
+        exact = forces_from_controls(*demand, C)
+        if all(F_MIN <= f <= F_MAX for f in exact):
+            np.testing.assert_allclose(forces, exact, atol=1e-15)
+
+
+def test_allocations_work_elementwise_on_arrays():
+    rng = np.random.default_rng(3)
+    demand = (rng.uniform(-2.0, 13.0, 40), *rng.normal(0.0, 1.5, (2, 40)), rng.normal(0.0, 0.03, 40))
+    for allocation in ALLOCATIONS:
+        batch = allocate(allocation, *demand, C, F_MIN, F_MAX)
+        for i in range(40):
+            single = allocate(allocation, *(float(d[i]) for d in demand), C, F_MIN, F_MAX)
+            np.testing.assert_allclose([f[i] for f in batch], single, rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match='allocation'):
+        allocate('scale', 5.0, 0.0, 0.0, 0.0, C, F_MIN, F_MAX)

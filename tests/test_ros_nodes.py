@@ -498,6 +498,7 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
     ('quad_sim.sim_node', {'mode': 'warp'}, 'mode'),
     ('nnit2fsmc_controller.controller_node', {'nnit2fsmc.axes.x.fuzzy_gain': -1.0}, 'nnit2fsmc.axes.x.fuzzy_gain'),
     ('nnit2fsmc_controller.controller_node', {'controller': 'lqr'}, 'controller'),
+    ('nnit2fsmc_controller.controller_node', {'common.allocation': 'scale'}, 'common.allocation'),
     ('nnit2fsmc_controller.trajectory_node', {'scenario': 'loop'}, 'scenario'),
 ])
 def test_invalid_parameter_is_refused_at_start_naming_it(module, params, name):

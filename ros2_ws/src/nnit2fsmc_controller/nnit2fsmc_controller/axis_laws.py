@@ -13,6 +13,8 @@ are on their way).
   v = U_eq_hat (neural network) + U_fuzzy (IT2 fuzzy corrective term), the network learning online.
 * :class:`SlidingModeLaw`: classic SMC, v = (ref_acc - lambda de - drift - K sw(S)) / gain, with
   sw = sign (``boundary_layer`` = 0) or sat(S / boundary_layer).
+* :class:`IntegralSlidingModeLaw`: SMC on the integral surface S = de + lambda e + mu int(e), with a
+  switching term sized for a disturbance bound and a gain uncertainty (docs/BASELINES.md).
 * :class:`PIDLaw`: v = (ref_acc - kp e - ki int(e) - kd de - drift) / gain, anti-windup by clamping.
 
 Every argument is a float (one vehicle) or a numpy array with one element per vehicle (a batch;
@@ -105,6 +107,55 @@ class SlidingModeLaw:
         equivalent = (ref_acc - self.lam * de - drift) / gain
         corrective = -self.switching_gain * self.switching(surface) / gain
         return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
+
+
+class IntegralSlidingModeLaw:
+    """SMC on an integral sliding surface with a boundary layer, sized for bounded model errors.
+
+    With I = int(e) dt (clamped to +-integral_limit) and the nominal model q'' = drift + gain v:
+
+        S     = de + lambda e + mu I
+        u_eq  = ref_acc - lambda de - mu e - drift          (makes dS/dt = 0 on the nominal model)
+        K     = switching_gain + gain_uncertainty |u_eq|     (Slotine & Li, Applied Nonlinear Control, 7.1.3)
+        v     = (u_eq - clip(slope S, -K, K)) / gain
+
+    ``switching_gain`` = (F + eta) / r_min bounds the additive model error F [units of q''] with a
+    margin eta, ``gain_uncertainty`` = max(1/r_min - 1, 1 - 1/r_max) the multiplicative one
+    (true gain / nominal gain in [r_min, r_max]). clip(slope S, -K, K) = K sat(S / Phi) with the
+    boundary layer Phi = K / slope: inside it the law is the linear -slope S (the bandwidth the
+    other controllers are tuned to), outside it the full switching gain K.
+
+    Anti-windup: the integral is clamped and moves only while the state is inside the boundary
+    layer (conditional integration); in the reaching phase it is held.
+    """
+
+    STATE = ('integral',)
+
+    def __init__(self, lam: float, mu: float, slope: float, switching_gain: float, gain_uncertainty: float,
+                 integral_limit: float, dt: float):
+        self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
+        self.mu = check_number('integral_gain', mu, 0.0)
+        self.slope = check_number('slope', slope, 0.0, low_inclusive=False)
+        self.switching_gain = check_number('switching_gain', switching_gain, 0.0)
+        self.gain_uncertainty = check_number('gain_uncertainty', gain_uncertainty, 0.0)
+        self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
+        self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
+        self.integral = 0.0
+
+    def adapt(self) -> None:
+        """Nothing to learn (the integral is part of the update)."""
+
+    def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
+        xp = namespace_for(e)
+        limit = self.integral_limit
+        integral = xp.clip(self.integral + e * self.dt, -limit, limit)
+        surface = de + self.lam * e + self.mu * integral
+        equivalent = ref_acc - self.lam * de - self.mu * e - drift
+        bound = self.switching_gain + self.gain_uncertainty * xp.abs(equivalent)
+        linear = self.slope * surface
+        self.integral = xp.where(xp.abs(linear) < bound, integral, self.integral)
+        corrective = -xp.clip(linear, -bound, bound)
+        return AxisOutput((equivalent + corrective) / gain, surface, equivalent / gain, corrective / gain)
 
 
 class PIDLaw:

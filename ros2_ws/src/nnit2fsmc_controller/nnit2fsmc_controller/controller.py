@@ -6,7 +6,9 @@ One law per subsystem (x, y, z, phi, theta, psi; :mod:`.axis_laws`) inside one s
    gives the collective thrust U1 [N].
 2. Desired roll and pitch (eq. 10 as it is meant, see below) from v_x, v_y and the measured yaw.
 3. Attitude loop: the phi, theta, psi laws give U2 [N], U3 [N], U4 [N m] (eq. 1 and 2 units).
-4. Rotor thrusts by the inverse of eq. (2), clipped to the rotor limits.
+4. Rotor thrusts by the inverse of eq. (2) within the rotor limits: by thrust-priority allocation
+   (U1 first, then U2 and U3, U4 last; ``allocation='priority'``) or by clipping each rotor
+   (``'clip'``, paper-faithful); :func:`quad_msgs_bridge.mixer.allocate`.
 
 Eq. (10) as printed, phi_d = U_eq_psi + U_fuzzy and theta_d = U_eq_phi + U_fuzzy, names the wrong
 subsystems and drops the yaw. What it means: the y subsystem's output sets the roll and the x
@@ -42,8 +44,8 @@ from typing import NamedTuple, Sequence
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.reference import ReferenceSample
-from quad_msgs_bridge.mixer import controls_from_forces, forces_from_controls, saturate_forces
-from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
+from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, controls_from_forces
+from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
 from .axis_laws import AxisOutput
 
@@ -57,6 +59,23 @@ class ControlOutput(NamedTuple):
     controls: tuple[float, float, float, float]   #: U1 [N], U2 [N], U3 [N], U4 [N m] the thrusts realise
     axes: dict[str, AxisOutput]                   #: per-subsystem diagnostics, keys AXES
     attitude_reference: tuple[float, float, float]  #: phi_d, theta_d, psi_d [rad]
+
+
+def check_finite(t: float, state: Sequence, reference: ReferenceSample):
+    """The numeric namespace of ``state``; ValueError if any value of the state or the reference is not finite."""
+    xp = namespace_for(state[0])
+    values = (*state, *reference.position, *reference.velocity, *reference.acceleration,
+              reference.yaw, reference.yaw_rate, reference.yaw_acceleration)
+    if not xp.all_finite(values):
+        raise ValueError(f'non-finite state or reference at t={t}')
+    return xp
+
+
+def check_allocation(allocation: str) -> str:
+    """``allocation`` if it is one of mixer.ALLOCATIONS, else ParameterError naming common.allocation."""
+    if allocation not in ALLOCATIONS:
+        raise ParameterError(f'common.allocation: {allocation!r} is not one of {", ".join(ALLOCATIONS)}')
+    return allocation
 
 
 class RateFilter:
@@ -86,7 +105,7 @@ class CascadedController:
     STATE = ()   #: its state lives in its laws and rate filters (nnit2fsmc_controller.tuning)
 
     def __init__(self, name: str, params: VehicleParams, laws: dict, dt: float,
-                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02):
+                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority'):
         missing = [axis for axis in AXES if axis not in laws]
         if missing:
             raise ValueError(f'controller {name}: no law for axes {missing}')
@@ -96,6 +115,7 @@ class CascadedController:
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.max_tilt = check_number('max_tilt', max_tilt, 0.0, 1.4, low_inclusive=False)
         tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
+        self.allocation = check_allocation(allocation)
         self._max_horizontal = params.g * math.tan(self.max_tilt)
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
 
@@ -105,11 +125,7 @@ class CascadedController:
         Raises ValueError on a non-finite state or reference (of any vehicle of a batch), before any
         law (or its learning) runs.
         """
-        xp = namespace_for(state[0])
-        values = (*state, *reference.position, *reference.velocity, *reference.acceleration,
-                  reference.yaw, reference.yaw_rate, reference.yaw_acceleration)
-        if not xp.all_finite(values):
-            raise ValueError(f'non-finite state or reference at t={t}')
+        xp = check_finite(t, state, reference)
         p = self.params
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         (xd, yd, zd), (vxd, vyd, vzd), (axd, ayd, azd) = reference.position, reference.velocity, reference.acceleration
@@ -139,9 +155,8 @@ class CascadedController:
                                      (dphi * dtheta * (p.Ix - p.Iy) - p.Kfpsi * xp.signed_square(dpsi)) / p.Iz,
                                      1.0 / p.Iz)
 
-        forces = saturate_forces(
-            forces_from_controls(out_z.value, out_phi.value, out_theta.value, out_psi.value, p.yaw_coefficient),
-            p.F_min, p.F_max)
+        forces = allocate(self.allocation, out_z.value, out_phi.value, out_theta.value, out_psi.value,
+                          p.yaw_coefficient, p.F_min, p.F_max)
         return ControlOutput(
             forces=forces,
             controls=controls_from_forces(*forces, p.yaw_coefficient),

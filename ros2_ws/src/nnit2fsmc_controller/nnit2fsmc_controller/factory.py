@@ -6,15 +6,17 @@ from typing import Any, Mapping
 
 import yaml
 
+from quad_msgs_bridge.mixer import ALLOCATIONS
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
-from .axis_laws import NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
+from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
 from .controller import AXES, CascadedController
 from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector
 from .neural_network import EquivalentControlNetwork
+from .se3 import SE3Controller
 
 DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controller.yaml'
-CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'pid')
+CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3')
 NN_INPUTS = 3   # (ref_vel, ref_acc, 1), see NNIT2FSMCLaw
 
 
@@ -73,7 +75,7 @@ def control_period(gains: Mapping[str, Any]) -> float:
 
 
 def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] | None = None,
-                     batch: int | None = None) -> CascadedController:
+                     batch: int | None = None) -> CascadedController | SE3Controller:
     """A fresh controller of ``kind`` (one of CONTROLLERS) for the nominal vehicle ``params``.
 
     ``batch``: None for one vehicle (states of floats), or the number B of vehicles it steps at once
@@ -82,6 +84,13 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
     gains = load_gains() if gains is None else gains
     dt = control_period(gains)
     lam = {axis: _positive(gains, f'common.lambda.{axis}') for axis in AXES}
+    structure = dict(max_tilt=_positive(gains, 'common.max_tilt'),
+                     angle_filter_tau=_positive(gains, 'common.angle_filter_tau'),
+                     allocation=gains.get('common', {}).get('allocation', 'priority'))
+    if kind == 'se3':
+        se3_gains = {axis: tuple(_non_negative(gains, f'se3.axes.{axis}.{name}')
+                                 for name in ('k_error', 'k_rate', 'k_integral', 'integral_limit')) for axis in AXES}
+        return SE3Controller(kind, params, se3_gains, lam, dt, **structure)
     if kind == 'nnit2fsmc':
         hidden = int(_positive(gains, 'nnit2fsmc.hidden_units'))
         seed = int(_non_negative(gains, 'nnit2fsmc.seed'))
@@ -106,6 +115,15 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
             lam[axis], _non_negative(gains, f'smc.switching_gain.{axis}'),
             _positive(gains, f'smc.boundary_layer.{axis}') if kind == 'smc-sat' else 0.0)
             for axis in AXES}
+    elif kind == 'smc-integral':
+        laws = {axis: IntegralSlidingModeLaw(
+            lam[axis],
+            mu=_non_negative(gains, f'smc_integral.axes.{axis}.integral_gain'),
+            slope=_positive(gains, f'smc_integral.axes.{axis}.slope'),
+            switching_gain=_non_negative(gains, f'smc_integral.axes.{axis}.switching_gain'),
+            gain_uncertainty=_non_negative(gains, f'smc_integral.axes.{axis}.gain_uncertainty'),
+            integral_limit=_non_negative(gains, f'smc_integral.axes.{axis}.integral_limit'),
+            dt=dt) for axis in AXES}
     elif kind == 'pid':
         laws = {axis: PIDLaw(
             lam[axis],
@@ -116,10 +134,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
             dt=dt) for axis in AXES}
     else:
         raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
-    return CascadedController(
-        kind, params, laws, dt,
-        max_tilt=_positive(gains, 'common.max_tilt'),
-        angle_filter_tau=_positive(gains, 'common.angle_filter_tau'))
+    return CascadedController(kind, params, laws, dt, **structure)
 
 
 def flatten_gains(gains: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
@@ -151,6 +166,8 @@ GAIN_DESCRIPTIONS = {
     'control_rate': 'controller update rate [Hz] (equals the simulator odometry rate)',
     'max_tilt': 'largest roll/pitch the position loop may ask for [rad]',
     'angle_filter_tau': 'time constant of the desired-angle differentiation filter [s]',
+    'allocation': 'rotor limits: priority (U1 kept, then roll/pitch scaled to fit, yaw last) or clip (each rotor '
+                  'clipped, paper-faithful)',
     'lambda': 'sliding-surface slope lambda of S = de + lambda e [1/s]',
     'type_reducer': 'IT2 type reduction: km (exact Karnik-Mendel) or nie-tan',
     'lower_height': 'height of the lower membership functions, in (0, 1]',
@@ -165,13 +182,20 @@ GAIN_DESCRIPTIONS = {
     'boundary_layer': 'smc-sat boundary-layer width [units of S]',
     'switching_gain': 'SMC switching gain [units of the second derivative of the subsystem]',
     'kp': 'PID proportional gain', 'ki': 'PID integral gain', 'kd': 'PID derivative gain',
-    'integral_limit': 'PID integral clamp [units of e * s]',
+    'integral_limit': 'integral clamp of pid, smc-integral, se3 [units of e * s]',
+    'slope': 'smc-integral linear gain inside the boundary layer [units of q\'\' per unit of S]',
+    'integral_gain': 'smc-integral surface S = de + lambda e + integral_gain int(e) [1/s^2]',
+    'gain_uncertainty': 'smc-integral relative control-gain uncertainty: adds this times |u_eq| to the switching gain',
+    'k_error': 'se3 attitude or position error gain, divided by J or m [1/s^2]',
+    'k_rate': 'se3 angular or linear velocity error gain, divided by J or m [1/s]',
+    'k_integral': 'se3 integral gain, divided by J or m [1/s^3]',
 }
 
 
 #: the valid values of each string gain, by the last component of its name
 GAIN_CHOICES = {
     'type_reducer': TYPE_REDUCERS,
+    'allocation': ALLOCATIONS,
 }
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from quad_msgs_bridge.numeric import namespace_for
 
 ROTOR_NAMES = ('F1_front', 'F2_right', 'F3_back', 'F4_left')
+ALLOCATIONS = ('priority', 'clip')   #: how U1..U4 beyond the rotor limits become thrusts (:func:`allocate`)
 CONTROL_NAMES = ('U1', 'U2', 'U3', 'U4')
 CONTROL_UNITS = ('N', 'N', 'N', 'N m')   #: of U1..U4
 
@@ -36,3 +37,63 @@ def saturate_forces(forces, f_min, f_max):
     """Each rotor thrust clipped to its physical range [f_min, f_max] [N]."""
     clip = namespace_for(forces[0]).clip
     return tuple(clip(f, f_min, f_max) for f in forces)
+
+
+def clip_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
+    """Rotor thrusts [N] for U1..U4 by the exact inverse of eq. (2), each then clipped to [f_min, f_max].
+
+    Paper-faithful (the paper has no rotor limits), but a large yaw or roll demand can take lift away:
+    two rotors clipped at f_min leave U1 below what was commanded.
+    """
+    return saturate_forces(forces_from_controls(u1, u2, u3, u4, yaw_coefficient), f_min, f_max)
+
+
+def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
+    """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m]: thrust first, then roll and pitch, yaw last.
+
+    With the mean thrust m = U1/4, the half torques h_r = U2/2, h_p = U3/2 and the yaw shift
+    y = U4/(4 c) (c = yaw_coefficient [m]; y moves thrust from rotors 1, 3 to rotors 2, 4), eq. (2)
+    inverted reads F1 = m - h_p - y, F2 = m - h_r + y, F3 = m + h_p - y, F4 = m + h_r + y.
+
+    1. U1 is clipped to [4 f_min, 4 f_max] (what four rotors can give); it is then realised exactly.
+    2. U2 and U3 are scaled by the largest common factor s in [0, 1] (the direction of the roll/pitch
+       torque is kept) for which some yaw shift between 0 and the demanded one keeps every rotor in
+       [f_min, f_max]: yaw may be cut, even to nothing, for roll and pitch, but never reversed.
+    3. The yaw shift is the demanded one clipped to what then fits.
+
+    So U1 is never given away for a torque, U4 is never larger than asked nor of the other sign,
+    and a demand that fits is realised exactly (the inverse of eq. 2). Floats or arrays
+    (elementwise, one element per vehicle).
+    """
+    xp = namespace_for(u1, u2, u3, u4)
+    mean = 0.25 * xp.clip(u1, 4.0 * f_min, 4.0 * f_max)
+    below, above = mean - f_min, f_max - mean                 # room of the mean thrust, >= 0
+    yaw = 0.25 * u4 / yaw_coefficient
+    low, high = xp.minimum(yaw, 0.0), xp.maximum(yaw, 0.0)   # the yaw shifts allowed: between 0 and the demand
+    pitch, roll = 0.5 * xp.abs(u3), 0.5 * xp.abs(u2)
+
+    def most(room, size):
+        """Largest s with s size <= room (room >= 0), at most 1."""
+        return xp.minimum(1.0, room / xp.maximum(xp.maximum(size, room), 1e-300))
+
+    # every rotor in range for some shift in [low, high]: the lower bounds of the shift (rotors 1, 3 below
+    # f_max; 2, 4 above f_min) below its upper bounds (1, 3 above f_min; 2, 4 below f_max) and the demand range
+    scale = most(f_max - f_min, 2.0 * pitch)
+    for room, size in ((f_max - f_min, 2.0 * roll), (2.0 * above, pitch + roll), (2.0 * below, pitch + roll),
+                       (above + high, pitch), (below + high, roll), (below - low, pitch), (above - low, roll)):
+        scale = xp.minimum(scale, most(room, size))
+    half_roll, half_pitch = 0.5 * scale * u2, 0.5 * scale * u3
+    shift = xp.clip(yaw, xp.maximum(scale * pitch - above, scale * roll - below),
+                    xp.minimum(below - scale * pitch, above - scale * roll))
+    forces = (mean - half_pitch - shift, mean - half_roll + shift, mean + half_pitch - shift, mean + half_roll + shift)
+    return saturate_forces(forces, f_min, f_max)   # removes rounding only (1e-16 N)
+
+
+def allocate(allocation, u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
+    """Rotor thrusts [N] for U1..U4 by ``allocation``: 'priority' (:func:`priority_allocation`) or
+    'clip' (:func:`clip_allocation`)."""
+    if allocation == 'priority':
+        return priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max)
+    if allocation == 'clip':
+        return clip_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max)
+    raise ValueError(f'allocation {allocation!r} is not one of {", ".join(ALLOCATIONS)}')

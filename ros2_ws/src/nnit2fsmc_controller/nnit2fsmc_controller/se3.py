@@ -1,0 +1,201 @@
+"""Geometric tracking control on SE(3) (Lee, Leok, McClamroch, "Geometric tracking control of a
+quadrotor UAV on SE(3)", CDC 2010), as a baseline with the interface of the cascaded controller.
+
+Frames: world ENU (e3 up), body FLU; R = Rz(psi) Ry(theta) Rx(phi) body-to-world (the paper's
+eq. 1 attitude); Omega = body rates [rad/s, body FLU] from the Euler rates of the state
+(:func:`quad_msgs_bridge.frames.body_rates_from_euler_rates`). Lee et al. write z down; with z up
+the thrust acts along +R e3 and gravity along -e3, so their signs of g e3 flip. With
+e_x = x - x_d, e_v = v - v_d [m, m/s, world], I_x = int(e_x) dt (clamped) and mass-normalised gains:
+
+    F_d   = m (-k_x e_x - k_v e_v - k_i I_x + g e3 + xdd_d)                          [N, world]
+    f     = F_d . R e3                                                                 (U1 [N])
+    b3_d  = F_d / |F_d|  (horizontal part limited to the tilt max_tilt, vertical part >= 0.1 m g)
+    R_d   = Rz(psi_d) Ry(theta_d) Rx(phi_d) with R_d e3 = b3_d and the reference heading psi_d
+    e_R   = 1/2 vee(R_d^T R - R^T R_d),   e_W = Omega - R^T R_d Omega_d,   I_R = int(e_R) dt (clamped)
+    M     = -J (k_R e_R + k_W e_W + k_I I_R) + Omega x J Omega
+            - J (hat(Omega) R^T R_d Omega_d - R^T R_d dOmega_d)                        [N m, body]
+    U2 = M_x / d,  U3 = M_y / d,  U4 = M_z                                             (eq. 1, 2)
+
+Choices (docs/BASELINES.md):
+
+* Diagonal gains: k_x, k_v, k_i per world axis and k_R, k_W, k_I per body axis, normalised by m and
+  by J = diag(Ix, Iy, Iz) (Lee et al. use scalars; a positive diagonal gain keeps the structure and
+  lets the roll/pitch and yaw bandwidths differ, as Ix != Iz asks).
+* Integral terms on e_x and e_R (the integral extension of Goodarzi, Lee, Lee 2013): the section IV
+  forces and moments are constant biases, which the 2010 law leaves as a steady error.
+* b1_d: Lee et al. leave the heading direction free (b1_d not parallel to b3_d, projected). Here
+  R_d is the Z-Y-X attitude with the reference yaw psi_d and thrust axis b3_d, so that the heading
+  is the paper's yaw angle psi, the one the metrics and the other controllers track.
+* Omega_d and dOmega_d: from the Euler rates of (phi_d, theta_d, psi_d): psi_d' and psi_d'' are the
+  reference's; phi_d', theta_d' and their derivatives are filtered derivatives (time constant
+  ``angle_filter_tau``), as in the cascade's eq. (10). Omega_d is the exact body-rate map of those
+  rates and dOmega_d its exact time derivative.
+* The nominal model's drag terms (translational 5.6e-4 N s/m, rotational friction) are not fed
+  forward: Lee et al. have none, and they are below 1e-3 of the weight on the paper flight.
+
+One controller steps one vehicle (floats) or a batch (numpy arrays, ``batch=B``), through the
+namespace of :mod:`quad_msgs_bridge.numeric`.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+from quad_msgs_bridge.frames import body_rates_from_euler_rates, rotation_from_euler
+from quad_msgs_bridge.mixer import allocate, controls_from_forces
+from quad_msgs_bridge.numeric import namespace_for
+from quad_msgs_bridge.reference import ReferenceSample
+from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
+
+from .axis_laws import AxisOutput
+from .controller import AXES, ControlOutput, RateFilter, check_allocation, check_finite
+
+#: minimum vertical part of the desired force, in units of m g (keeps b3_d pointing up)
+MIN_LIFT = 0.1
+
+
+def _transpose(a):
+    return tuple(zip(*a))
+
+
+def _matmul(a, b):
+    """Product of two 3x3 matrices given as rows."""
+    return tuple(tuple(sum(a[i][k] * b[k][j] for k in range(3)) for j in range(3)) for i in range(3))
+
+
+def _matvec(a, v):
+    return tuple(a[i][0] * v[0] + a[i][1] * v[1] + a[i][2] * v[2] for i in range(3))
+
+
+def _cross(a, b):
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+def _vee_of_antisymmetric_part(a):
+    """vee(a - a^T) / 2 for a 3x3 matrix a: the e_R of Lee et al. when a = R_d^T R."""
+    return (0.5 * (a[2][1] - a[1][2]), 0.5 * (a[0][2] - a[2][0]), 0.5 * (a[1][0] - a[0][1]))
+
+
+def euler_rate_derivative_to_body(euler, rates, accelerations):
+    """d/dt of the body rates (p, q, r) [rad/s^2] of Z-Y-X Euler angles with the given rates and
+    accelerations (the time derivative of :func:`body_rates_from_euler_rates`)."""
+    phi, theta, _ = euler
+    dphi, dtheta, dpsi = rates
+    ddphi, ddtheta, ddpsi = accelerations
+    xp = namespace_for(phi, theta)
+    cf, sf, ct, st = xp.cos(phi), xp.sin(phi), xp.cos(theta), xp.sin(theta)
+    return (ddphi - ct * dtheta * dpsi - st * ddpsi,
+            -sf * dphi * dtheta + cf * ddtheta + cf * ct * dphi * dpsi - sf * st * dtheta * dpsi + sf * ct * ddpsi,
+            -cf * dphi * dtheta - sf * ddtheta - sf * ct * dphi * dpsi - cf * st * dtheta * dpsi + cf * ct * ddpsi)
+
+
+class SE3Controller:
+    """update(t, state, reference) -> rotor thrusts, by the geometric SE(3) law (module docstring).
+
+    ``gains[axis]`` = (k_error, k_rate, k_integral, integral_limit) for the AXES: x, y, z are
+    k_x [1/s^2], k_v [1/s], k_i [1/s^3] (multiplied by m) and the clamp of I_x [m s]; phi, theta,
+    psi are k_R [1/s^2], k_W [1/s], k_I [1/s^3] about body x, y, z (multiplied by Ix, Iy, Iz) and
+    the clamp of I_R [rad s]. ``lam`` (the common sliding-surface slopes) only sets the surfaces it
+    reports, S = de + lambda e, so that its records compare with the other controllers'.
+    """
+
+    STATE = ('position_integral', 'attitude_integral')   #: with its rate filters' (nnit2fsmc_controller.tuning)
+
+    def __init__(self, name: str, params: VehicleParams, gains: dict, lam: dict, dt: float,
+                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority'):
+        self.name = name
+        self.params = params
+        self.gains = {axis: tuple(check_number(f'se3.axes.{axis}', value, 0.0) for value in gains[axis])
+                      for axis in AXES}
+        self.lam = {axis: check_number('lambda', lam[axis], 0.0, low_inclusive=False) for axis in AXES}
+        self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
+        self.max_tilt = check_number('max_tilt', max_tilt, 0.0, 1.4, low_inclusive=False)
+        tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
+        self.allocation = check_allocation(allocation)
+        self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
+        self.position_integral = (0.0, 0.0, 0.0)    #: I_x [m s, world]
+        self.attitude_integral = (0.0, 0.0, 0.0)    #: I_R [rad s, body]
+
+    def adapt(self) -> None:
+        """Nothing to learn."""
+
+    def surface_slopes(self) -> tuple[float, ...]:
+        """The slopes lambda [1/s] of the surfaces it reports, in AXES order (``control/diagnostics``)."""
+        return tuple(self.lam[axis] for axis in AXES)
+
+    def _integrate(self, integral, error, axes):
+        xp = namespace_for(*error)
+        return tuple(xp.clip(i + e * self.dt, -self.gains[a][3], self.gains[a][3])
+                     for i, e, a in zip(integral, error, axes))
+
+    def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
+        """Rotor thrusts [N] for the 12-state ``state`` and the reference at the same instant t [s].
+
+        Raises ValueError on a non-finite state or reference, before any state changes.
+        """
+        xp = check_finite(t, state, reference)
+        p = self.params
+        x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
+        position_axes, attitude_axes = AXES[:3], AXES[3:]
+        ex = tuple(q - qd for q, qd in zip((x, y, z), reference.position))
+        ev = tuple(v - vd for v, vd in zip((vx, vy, vz), reference.velocity))
+        self.position_integral = self._integrate(self.position_integral, ex, position_axes)
+        feedback = tuple(-p.m * (self.gains[a][0] * e + self.gains[a][1] * de + self.gains[a][2] * i)
+                         for a, e, de, i in zip(position_axes, ex, ev, self.position_integral))
+        force = [fb + p.m * acc for fb, acc in zip(feedback, reference.acceleration)]
+        force[2] = force[2] + p.m * p.g
+        lift = xp.maximum(force[2], MIN_LIFT * p.m * p.g)
+        horizontal = xp.hypot(force[0], force[1])
+        allowed = lift * math.tan(self.max_tilt)
+        shrink = xp.minimum(1.0, allowed / xp.maximum(horizontal, 1e-12 * p.m * p.g))
+        force[0], force[1] = force[0] * shrink, force[1] * shrink
+
+        rotation = rotation_from_euler(phi, theta, psi)
+        thrust_axis = tuple(row[2] for row in rotation)
+        thrust = force[0] * thrust_axis[0] + force[1] * thrust_axis[1] + force[2] * thrust_axis[2]
+
+        psi_d = reference.yaw
+        cpsi, spsi = xp.cos(psi_d), xp.sin(psi_d)
+        heading_x = cpsi * force[0] + spsi * force[1]        # b3_d (unnormalised, vertical part >= lift)
+        heading_y = -spsi * force[0] + cpsi * force[1]       # in the frame turned by -psi_d
+        theta_d = xp.atan2(heading_x, lift)
+        phi_d = xp.atan2(-heading_y, xp.hypot(heading_x, lift))
+        f = self._filters
+        dphi_d = f['dphi'].update(phi_d)
+        ddphi_d = f['ddphi'].update(dphi_d)
+        dtheta_d = f['dtheta'].update(theta_d)
+        ddtheta_d = f['ddtheta'].update(dtheta_d)
+        desired = (phi_d, theta_d, psi_d)
+        desired_rates = (dphi_d, dtheta_d, reference.yaw_rate)
+        omega_d = body_rates_from_euler_rates(desired, desired_rates)
+        domega_d = euler_rate_derivative_to_body(desired, desired_rates,
+                                                 (ddphi_d, ddtheta_d, reference.yaw_acceleration))
+
+        omega = body_rates_from_euler_rates((phi, theta, psi), (dphi, dtheta, dpsi))
+        rotation_d = rotation_from_euler(*desired)
+        relative = _matmul(_transpose(rotation), rotation_d)           # R^T R_d
+        e_r = _vee_of_antisymmetric_part(_transpose(relative))          # 1/2 vee(R_d^T R - R^T R_d)
+        omega_d_body = _matvec(relative, omega_d)                       # R^T R_d Omega_d
+        e_w = tuple(w - wd for w, wd in zip(omega, omega_d_body))
+        self.attitude_integral = self._integrate(self.attitude_integral, e_r, attitude_axes)
+        inertia = (p.Ix, p.Iy, p.Iz)
+        momentum = tuple(j * w for j, w in zip(inertia, omega))
+        gyroscopic = _cross(omega, momentum)
+        turning = _cross(omega, omega_d_body)
+        feedforward_d = _matvec(relative, domega_d)
+        moment_feedback = tuple(-j * (self.gains[a][0] * er + self.gains[a][1] * ew + self.gains[a][2] * i)
+                                for a, j, er, ew, i in zip(attitude_axes, inertia, e_r, e_w, self.attitude_integral))
+        moment_model = tuple(g - j * (w - a) for g, j, w, a in zip(gyroscopic, inertia, turning, feedforward_d))
+        scale = (p.d, p.d, 1.0)                                  # U2 = M_x / d, U3 = M_y / d, U4 = M_z
+        u2, u3, u4 = ((fb + mm) / s for fb, mm, s in zip(moment_feedback, moment_model, scale))
+
+        forces = allocate(self.allocation, thrust, u2, u3, u4, p.yaw_coefficient, p.F_min, p.F_max)
+        lam = self.lam
+        axes = {a: AxisOutput(force[k] / p.m, ev[k] + lam[a] * ex[k], reference.acceleration[k],
+                              force[k] / p.m - reference.acceleration[k])     # feedback, after the tilt limit
+                for k, a in enumerate(AXES[:2])}
+        axes['z'] = AxisOutput(thrust, ev[2] + lam['z'] * ex[2], thrust - feedback[2], feedback[2])
+        axes.update({a: AxisOutput(u, e_w[k] + lam[a] * e_r[k], mm / s, fb / s) for k, (a, u, fb, mm, s)
+                     in enumerate(zip(attitude_axes, (u2, u3, u4), moment_feedback, moment_model, scale))})
+        return ControlOutput(forces=forces, controls=controls_from_forces(*forces, p.yaw_coefficient),
+                             axes=axes, attitude_reference=desired)
