@@ -18,8 +18,16 @@ eq. (1) and a vertical specific force g,
 
 which reduces to theta_d = v_x / g, phi_d = -v_y / g at small angles and psi = 0. The tilt is
 limited to ``max_tilt``. The desired angle rates and accelerations the attitude surfaces need
-are obtained by first-order filtered differentiation of phi_d and theta_d (time constant
-``angle_filter_tau``).
+come from one of two sources (``attitude_rates``):
+
+* ``filter`` (the paper's structure): first-order filtered differentiation of phi_d and theta_d
+  (time constant ``angle_filter_tau``). phi_d and theta_d carry the position loop's feedback, so
+  sensor noise is differentiated twice.
+* ``flatness`` (differential flatness, Mellinger & Kumar 2011): the time derivatives of eq. (10)
+  along the reference, i.e. with dv/dt = reference jerk, d2v/dt2 = reference snap and
+  dpsi/dt, d2psi/dt2 the reference yaw rate and acceleration, evaluated at the commanded (v_x, v_y)
+  and the measured yaw (:meth:`CascadedController.flat_attitude_rates`). No measurement is
+  differentiated.
 
 Nominal model used by the model-based baselines (the NNIT2FSMC ignores it): for each subsystem
 q'' = drift + gain v with, from eq. (1),
@@ -43,11 +51,13 @@ from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.mixer import controls_from_forces, forces_from_controls, saturate_forces
-from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
+from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
 from .axis_laws import AxisOutput
+from .estimation import ComplementaryFilter
 
 AXES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
+ATTITUDE_RATES = ('flatness', 'filter')   #: sources of the desired roll/pitch rates (module docstring)
 
 
 class ControlOutput(NamedTuple):
@@ -83,10 +93,13 @@ class RateFilter:
 class CascadedController:
     """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws."""
 
-    STATE = ()   #: its state lives in its laws and rate filters (nnit2fsmc_controller.tuning)
+    STATE = ()   #: its state lives in its laws, rate filters and measurement filter (nnit2fsmc_controller.tuning)
 
     def __init__(self, name: str, params: VehicleParams, laws: dict, dt: float,
-                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02):
+                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02, attitude_rates: str = 'filter',
+                 measurement_filter_hz: float = 0.0):
+        """``measurement_filter_hz`` > 0: the laws see position and angles through a complementary
+        filter of that crossover (:mod:`.estimation`); 0 feeds them the measurement as it is."""
         missing = [axis for axis in AXES if axis not in laws]
         if missing:
             raise ValueError(f'controller {name}: no law for axes {missing}')
@@ -96,6 +109,11 @@ class CascadedController:
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.max_tilt = check_number('max_tilt', max_tilt, 0.0, 1.4, low_inclusive=False)
         tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
+        if attitude_rates not in ATTITUDE_RATES:
+            raise ParameterError(f'common.attitude_rates: {attitude_rates!r} is not one of {", ".join(ATTITUDE_RATES)}')
+        self.attitude_rates = attitude_rates
+        self.measurement_filter = (ComplementaryFilter(self.dt, measurement_filter_hz)
+                                   if check_number('measurement_filter_hz', measurement_filter_hz, 0.0) > 0.0 else None)
         self._max_horizontal = params.g * math.tan(self.max_tilt)
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
 
@@ -107,10 +125,12 @@ class CascadedController:
         """
         xp = namespace_for(state[0])
         values = (*state, *reference.position, *reference.velocity, *reference.acceleration,
-                  reference.yaw, reference.yaw_rate, reference.yaw_acceleration)
+                  reference.yaw, reference.yaw_rate, reference.yaw_acceleration, *reference.jerk, *reference.snap)
         if not xp.all_finite(values):
             raise ValueError(f'non-finite state or reference at t={t}')
         p = self.params
+        if self.measurement_filter is not None:
+            state = self.measurement_filter(state)
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         (xd, yd, zd), (vxd, vyd, vzd), (axd, ayd, azd) = reference.position, reference.velocity, reference.acceleration
         laws = self.laws
@@ -121,11 +141,16 @@ class CascadedController:
         out_z = laws['z'].update(z - zd, vz - vzd, vzd, azd, -p.g - p.Kfz * vz / p.m, cphi * ctheta / p.m)
 
         phi_d, theta_d = self.attitude_from_accelerations(out_x.value, out_y.value, psi)
-        f = self._filters
-        dphi_d = f['dphi'].update(phi_d)
-        ddphi_d = f['ddphi'].update(dphi_d)
-        dtheta_d = f['dtheta'].update(theta_d)
-        ddtheta_d = f['ddtheta'].update(dtheta_d)
+        if self.attitude_rates == 'flatness':
+            dphi_d, ddphi_d, dtheta_d, ddtheta_d = self.flat_attitude_rates(
+                out_x.value, out_y.value, reference.jerk[:2], reference.snap[:2], psi,
+                reference.yaw_rate, reference.yaw_acceleration)
+        else:
+            f = self._filters
+            dphi_d = f['dphi'].update(phi_d)
+            ddphi_d = f['ddphi'].update(dphi_d)
+            dtheta_d = f['dtheta'].update(theta_d)
+            ddtheta_d = f['ddtheta'].update(dtheta_d)
         psi_d = reference.yaw
 
         out_phi = laws['phi'].update(phi - phi_d, dphi - dphi_d, dphi_d, ddphi_d,
@@ -157,17 +182,58 @@ class CascadedController:
         for law in self.laws.values():
             law.adapt()
 
+    def _tilt_scale(self, ax, ay):
+        """Factor (<= 1) that brings the horizontal acceleration (ax, ay) [m/s^2] within the tilt limit."""
+        xp = namespace_for(ax, ay)
+        limit = self._max_horizontal
+        return limit / xp.maximum(xp.hypot(ax, ay), limit)
+
+    def flat_attitude_rates(self, ax, ay, jerk, snap, psi, dpsi, ddpsi):
+        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2]: the time derivatives of eq. (10) at
+        (ax, ay) [m/s^2] and yaw psi [rad] when the acceleration changes with ``jerk`` (jx, jy) [m/s^3]
+        and ``snap`` (sx, sy) [m/s^4] and the yaw with dpsi [rad/s], ddpsi [rad/s^2] (differential
+        flatness). Beyond the tilt limit the three are scaled like the acceleration.
+
+        With A = ax cos psi + ay sin psi, B = ax sin psi - ay cos psi, theta_d = atan(A / g) and
+        phi_d = atan(C), C = B cos(theta_d) / g:
+          A' = jA - dpsi B,  B' = jB + dpsi A  (jA, jB: the jerk rotated like (ax, ay))
+          A'' = sA - 2 dpsi jB - ddpsi B - dpsi^2 A,  B'' = sB + 2 dpsi jA + ddpsi A - dpsi^2 B
+          theta' = g A' / (g^2 + A^2),  theta'' = g A'' / (g^2 + A^2) - 2 g A A'^2 / (g^2 + A^2)^2
+          C' = (B' cos - B sin theta') / g,  C'' = (B'' cos - 2 B' sin theta' - B cos theta'^2 - B sin theta'') / g
+          phi' = C' / (1 + C^2),  phi'' = C'' / (1 + C^2) - 2 C C'^2 / (1 + C^2)^2
+        """
+        xp = namespace_for(ax, ay, psi)
+        scale = self._tilt_scale(ax, ay)
+        ax, ay = ax * scale, ay * scale
+        (jx, jy), (sx, sy) = jerk, snap
+        jx, jy, sx, sy = jx * scale, jy * scale, sx * scale, sy * scale
+        g = self.params.g
+        c, s = xp.cos(psi), xp.sin(psi)
+        a_, b_ = ax * c + ay * s, ax * s - ay * c
+        ja, jb = jx * c + jy * s, jx * s - jy * c
+        sa, sb = sx * c + sy * s, sx * s - sy * c
+        da, db = ja - dpsi * b_, jb + dpsi * a_
+        dda = sa - 2.0 * dpsi * jb - ddpsi * b_ - dpsi * dpsi * a_
+        ddb = sb + 2.0 * dpsi * ja + ddpsi * a_ - dpsi * dpsi * b_
+        q = g * g + a_ * a_
+        theta = xp.atan2(a_, g)
+        dtheta = g * da / q
+        ddtheta = g * dda / q - 2.0 * g * a_ * da * da / (q * q)
+        ct, st = xp.cos(theta), xp.sin(theta)
+        cc = b_ * ct / g
+        dc = (db * ct - b_ * st * dtheta) / g
+        ddc = (ddb * ct - 2.0 * db * st * dtheta - b_ * ct * dtheta * dtheta - b_ * st * ddtheta) / g
+        r = 1.0 + cc * cc
+        return dc / r, ddc / r - 2.0 * cc * dc * dc / (r * r), dtheta, ddtheta
+
     def attitude_from_accelerations(self, ax, ay, psi):
         """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi.
 
         Beyond the tilt limit the acceleration is scaled down to it, its direction kept.
         """
         xp = namespace_for(psi)
-        limit = self._max_horizontal
-        norm = xp.hypot(ax, ay)
-        beyond = norm > limit
-        divisor = xp.maximum(norm, limit)     # = norm wherever it is used: never a division by zero
-        ax, ay = xp.where(beyond, ax * limit / divisor, ax), xp.where(beyond, ay * limit / divisor, ay)
+        scale = self._tilt_scale(ax, ay)
+        ax, ay = ax * scale, ay * scale
         g = self.params.g
         cpsi, spsi = xp.cos(psi), xp.sin(psi)
         theta_d = xp.atan2(ax * cpsi + ay * spsi, g)
