@@ -163,7 +163,7 @@ def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt
         weight_limit=_positive(gains, 'nnit2fsmc.weight_limit'),
         seed=int(_non_negative(gains, 'nnit2fsmc.seed')) * len(AXES) + AXES.index(axis), batch=batch,
         modification=modification,
-        leakage=_non_negative(gains, 'nnit2fsmc.leakage') if modification != 'none' else 0.0)
+        leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0)
     return NNIT2FSMCLaw(lam, fuzzy, network, bias_only=kind == 'nnit2fsmc-bias')
 
 
@@ -199,7 +199,7 @@ GAIN_DESCRIPTIONS = {
     'attitude_rates': 'desired roll/pitch rates: flatness (from the reference jerk and snap) or filter (paper)',
     'measurement_filter_hz': 'crossover of the complementary filter of measured position and angles [Hz] (0: none, paper)',
     'modification': 'leakage of the NN learning: none (paper), sigma (sigma-modification) or e (e-modification)',
-    'leakage': 'leakage sigma of the sigma- or e-modification [1/(units of alpha)]',
+    'leakage': 'leakage rate sigma of the sigma- or e-modification [1/s]',
     'lambda': 'sliding-surface slope lambda of S = de + lambda e [1/s]',
     'type_reducer': 'IT2 type reduction: km (exact Karnik-Mendel) or nie-tan',
     'lower_height': 'height of the lower membership functions, in (0, 1]',

@@ -14,13 +14,16 @@ the fuzzy corrective term, so gradient descent with rate alpha gives
 Every weight is projected back onto [-weight_limit, weight_limit] after each update, so online
 learning cannot diverge whatever the fuzzy term does.
 
-Optional leakage (robust adaptive control; docs/ADAPTIVE.md), added to the gradient of every
-weight W with its initial value W0 (Wz: the seeded values, Wy: 0) as anchor:
+Optional leakage (robust adaptive control; docs/ADAPTIVE.md) of every weight W towards its initial
+value W0 (Wz: the seeded values, Wy: 0), with ``leakage`` l the share per update (sigma dt for a
+leakage rate sigma [1/s]):
 
-    sigma-modification (Ioannou & Kokotovic 1983):     W -= alpha * sigma * (W - W0)
-    e-modification (Narendra & Annaswamy 1987):        W -= alpha * sigma * |U_fuzzy| * (W - W0)
+    sigma-modification (Ioannou & Kokotovic 1983):   W -= l * (W - W0)
+    e-modification (Narendra & Annaswamy 1987):      W -= l * |U_fuzzy| / K_eq * (W - W0)
 
-so that, without persistent teaching, the weights relax back instead of drifting.
+so that, without persistent teaching, the weights relax back instead of drifting. (The classical
+forms scale the leakage by the adaptation gain too; here it is a rate of its own, because the
+per-subsystem rates alpha span four decades and alpha sigma > 1 would make the leakage unstable.)
 
 Each equation is written once, in :class:`EquivalentControlNetwork`, on top of a small layer
 algebra with two implementations of the same four operations: :class:`ListLayers` for one vehicle
@@ -132,14 +135,14 @@ class EquivalentControlNetwork:
                  weight_limit: float = 10.0, initial_spread: float = 0.5, seed: int = 0,
                  batch: int | None = None, modification: str = 'none', leakage: float = 0.0):
         """``batch``: None for one vehicle (float weights), else the number of vehicles B (array weights).
-        ``modification``: one of MODIFICATIONS, with leakage sigma ``leakage`` (see the module docstring)."""
+        ``modification``: one of MODIFICATIONS, with ``leakage`` the share per update, in [0, 1) (module docstring)."""
         self.output_gain = check_number('output_gain', output_gain, 0.0, low_inclusive=False)
         self.learning_rate = check_number('learning_rate', learning_rate, 0.0)
         self.weight_limit = check_number('weight_limit', weight_limit, 0.0, low_inclusive=False)
         if modification not in MODIFICATIONS:
             raise ParameterError(f'modification: {modification!r} is not one of {", ".join(MODIFICATIONS)}')
         self.modification = modification
-        self.leakage = check_number('leakage', leakage, 0.0) if modification != 'none' else 0.0
+        self.leakage = check_number('leakage', leakage, 0.0, 1.0, high_inclusive=False) if modification != 'none' else 0.0
         if n_inputs < 1 or n_hidden < 1:
             raise ValueError(f'network needs at least one input and one hidden unit, got {n_inputs}, {n_hidden}')
         rng = random.Random(seed)
@@ -196,7 +199,7 @@ class EquivalentControlNetwork:
         output_factors, hidden_factors = self._error_factors(u_fuzzy)
         hidden, output = self.hidden_weights, self.output_weights
         if sigma > 0.0:
-            factor = alpha * sigma * (abs(u_fuzzy) if self.modification == 'e' else 1.0)
+            factor = sigma * (abs(u_fuzzy) / self.output_gain if self.modification == 'e' else 1.0)
             hidden = layers.relax(hidden, self._hidden_anchor, factor)
             output = layers.relax(output, self._output_anchor, factor)
         self.hidden_weights = layers.outer_step(hidden, layers.elementwise(lambda f: alpha * f, hidden_factors),
