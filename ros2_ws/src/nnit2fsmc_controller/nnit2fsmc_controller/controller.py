@@ -23,11 +23,17 @@ come from one of two sources (``attitude_rates``):
 * ``filter`` (the paper's structure): first-order filtered differentiation of phi_d and theta_d
   (time constant ``angle_filter_tau``). phi_d and theta_d carry the position loop's feedback, so
   sensor noise is differentiated twice.
-* ``flatness`` (differential flatness, Mellinger & Kumar 2011): the time derivatives of eq. (10)
-  along the reference, i.e. with dv/dt = reference jerk, d2v/dt2 = reference snap and
-  dpsi/dt, d2psi/dt2 the reference yaw rate and acceleration, evaluated at the commanded (v_x, v_y)
-  and the measured yaw (:meth:`CascadedController.flat_attitude_rates`). No measurement is
-  differentiated.
+* ``flatness`` (differential flatness, Mellinger & Kumar 2011): split the desired attitude into
+  the attitude of the reference acceleration, phi_r = eq. (10) at (x_d'', y_d''), and the feedback
+  residual phi_d - phi_r. The rate and acceleration of phi_r are the exact time derivatives of
+  eq. (10) along the reference (reference jerk and snap, reference yaw rate and acceleration;
+  :meth:`CascadedController.flat_attitude_rates`); the residual, small and slow except while the
+  position loop corrects an error, is differentiated once by the filter. The surface uses
+  dphi_r + filtered d(residual)/dt; the law's reference inputs (the network's inputs, the
+  model-based equivalent control) are dphi_r and ddphi_r only: the network then sees the
+  reference motion, as in the position subsystems, and no feedback signal (with the filter's
+  derivatives of phi_d as inputs, learning adapts a feedback gain and limit-cycles under delay,
+  like the error inputs of docs/PAPER.md item 13).
 
 Nominal model used by the model-based baselines (the NNIT2FSMC ignores it): for each subsystem
 q'' = drift + gain v with, from eq. (1),
@@ -141,22 +147,24 @@ class CascadedController:
         out_z = laws['z'].update(z - zd, vz - vzd, vzd, azd, -p.g - p.Kfz * vz / p.m, cphi * ctheta / p.m)
 
         phi_d, theta_d = self.attitude_from_accelerations(out_x.value, out_y.value, psi)
+        f = self._filters
         if self.attitude_rates == 'flatness':
-            dphi_d, ddphi_d, dtheta_d, ddtheta_d = self.flat_attitude_rates(
-                out_x.value, out_y.value, reference.jerk[:2], reference.snap[:2], psi,
-                reference.yaw_rate, reference.yaw_acceleration)
+            phi_r, theta_r = self.attitude_from_accelerations(axd, ayd, psi)
+            dphi_r, ddphi_r, dtheta_r, ddtheta_r = self.flat_attitude_rates(
+                axd, ayd, reference.jerk[:2], reference.snap[:2], psi, reference.yaw_rate, reference.yaw_acceleration)
+            dphi_d = dphi_r + f['dphi'].update(phi_d - phi_r)
+            dtheta_d = dtheta_r + f['dtheta'].update(theta_d - theta_r)
         else:
-            f = self._filters
-            dphi_d = f['dphi'].update(phi_d)
-            ddphi_d = f['ddphi'].update(dphi_d)
-            dtheta_d = f['dtheta'].update(theta_d)
-            ddtheta_d = f['ddtheta'].update(dtheta_d)
+            dphi_d = dphi_r = f['dphi'].update(phi_d)
+            ddphi_r = f['ddphi'].update(dphi_d)
+            dtheta_d = dtheta_r = f['dtheta'].update(theta_d)
+            ddtheta_r = f['ddtheta'].update(dtheta_d)
         psi_d = reference.yaw
 
-        out_phi = laws['phi'].update(phi - phi_d, dphi - dphi_d, dphi_d, ddphi_d,
+        out_phi = laws['phi'].update(phi - phi_d, dphi - dphi_d, dphi_r, ddphi_r,
                                      (dtheta * dpsi * (p.Iy - p.Iz) - p.Kfphi * xp.signed_square(dphi)) / p.Ix,
                                      p.d / p.Ix)
-        out_theta = laws['theta'].update(theta - theta_d, dtheta - dtheta_d, dtheta_d, ddtheta_d,
+        out_theta = laws['theta'].update(theta - theta_d, dtheta - dtheta_d, dtheta_r, ddtheta_r,
                                          (dphi * dpsi * (p.Iz - p.Ix) - p.Kftheta * xp.signed_square(dtheta)) / p.Iy,
                                          p.d / p.Iy)
         out_psi = laws['psi'].update(wrap_angle(psi - psi_d), dpsi - reference.yaw_rate, reference.yaw_rate,
