@@ -17,6 +17,7 @@ delay that fails is followed by failing delays only (checked at the upper end). 
 
     .venv/bin/python bench/delay_margin.py nnit2fsmc smc-sign smc-sat pid --duration 30
     .venv/bin/python bench/delay_margin.py nnit2fsmc --gains my_gains.yaml --max-delay 0.1
+    .venv/bin/python bench/delay_margin.py nnit2fsmc --faithful        # the paper-faithful settings
 """
 from __future__ import annotations
 
@@ -35,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 
 from flight_stack.closed_loop import FailureRules  # noqa: E402
 from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
-from nnit2fsmc_controller.factory import load_gains  # noqa: E402
+from nnit2fsmc_controller.factory import PAPER_FAITHFUL, flatten_gains, load_gains, unflatten_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
 from quad_msgs_bridge.review.metrics import flight_metrics  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
@@ -143,11 +144,17 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('controllers', nargs='+')
     parser.add_argument('--gains', help='gains file (default: the packaged one)')
+    parser.add_argument('--faithful', action='store_true',
+                        help='fly the paper-faithful settings (factory.PAPER_FAITHFUL, docs/ADAPTIVE.md)')
     parser.add_argument('--max-delay', type=float, default=0.1, help='[s] upper end of the search')
     parser.add_argument('--duration', type=float, default=30.0, help='[s] paper flight length per trial')
     parser.add_argument('--threshold', type=float, default=0.05, help='[N] detrended rms of U2/U3 called a limit cycle')
     args = parser.parse_args(argv)
     gains = load_gains(args.gains)
+    if args.faithful:
+        flat = flatten_gains(gains)
+        flat.update(PAPER_FAITHFUL)
+        gains = unflatten_gains(flat)
     print('| controller | delay margin [ms] |\n|---|---:|')
     for kind in args.controllers:
         margin = delay_margin(kind, gains, max_delay=args.max_delay, duration=args.duration,
