@@ -4,7 +4,9 @@ Also the one-flight harness the adaptive-control study uses (``fly_case``, ``osc
 paper flight (or any scenario) with a transport delay [s], sensor noise and a control rate.
 
 A flight *fails the delay test* when it fails outright (non-finite, flipped, crashed, or a position
-error above ``max_error`` after settling), or when it shows a sustained oscillation: the rms of U2 or
+error above ``max_error`` after settling), when its position RMSE exceeds both 1 cm and 10 times
+its RMSE without delay (a degraded, oscillating flight that has not crashed yet: the sign-SMC at
+65 ms tracks with 54 cm RMSE), or when it shows a sustained oscillation: the rms of U2 or
 U3 about its own 0.5 s moving mean, over the last ``window`` seconds, above both ``threshold`` [N]
 and 3 times its value without delay (a sign-SMC chatters at rms ~0.5 N without any delay: that is
 its nominal behaviour, not a limit cycle caused by the delay). A smooth controller's stable flight
@@ -98,10 +100,13 @@ def fly_case(kind: str, gains: dict | None = None, *, delay_s: float = 0.0, nois
 
 
 def unstable(case: Case, threshold: float = 0.05, reference: Case | None = None) -> bool:
-    """Whether a flight diverged or limit-cycles (see the module docstring); ``reference``: the same
-    flight without delay (its oscillation x 3 raises the threshold)."""
+    """Whether a flight diverged, degraded or limit-cycles (see the module docstring); ``reference``: the
+    same flight without delay (its oscillation x 3 raises the threshold, its RMSE x 10 bounds the RMSE)."""
     level = threshold if reference is None else max(threshold, 3.0 * max(reference.oscillation))
-    return case.failure is not None or max(case.oscillation) > level or not case.metrics['all_finite']
+    degraded = reference is not None and case.metrics['rmse_position_m'] > max(
+        0.01, 10.0 * reference.metrics['rmse_position_m'])
+    return (case.failure is not None or max(case.oscillation) > level or not case.metrics['all_finite']
+            or degraded)
 
 
 def delay_margin(kind: str, gains: dict | None = None, *, max_delay: float = 0.1, duration: float = 30.0,
