@@ -32,6 +32,7 @@ ROWS = {   # name: (controller, keyword arguments of fly_case)
     'rate100': ('nnit2fsmc', {'control_rate': 100.0}),
     'noise': ('nnit2fsmc', {'noise': POSE_NOISE}),
     'noise-campaign': ('nnit2fsmc', {'noise': CAMPAIGN_NOISE}),
+    'lag30': ('nnit2fsmc', {'motor_lag_s': 0.030}),
     'sign': ('smc-sign', {}),
     'sign-noise': ('smc-sign', {'noise': POSE_NOISE}),
 }

@@ -42,7 +42,7 @@ from nnit2fsmc_controller.factory import PAPER_FAITHFUL, flatten_gains, load_gai
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
 from quad_msgs_bridge.review.metrics import flight_metrics  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
-from quad_sim.perturbations.actuation import TransportDelay  # noqa: E402
+from quad_sim.perturbations.actuation import MotorLag, TransportDelay  # noqa: E402
 from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise  # noqa: E402
 from quad_sim.perturbations.streams import flight_streams  # noqa: E402
 
@@ -78,9 +78,10 @@ def oscillation(record, window: float = 10.0, smooth: float = 0.5) -> tuple[floa
 
 
 def fly_case(kind: str, gains: dict | None = None, *, delay_s: float = 0.0, noise: SensorErrors | None = None,
-             control_rate: float | None = None, duration: float = 60.0, scenario: str = 'paper',
+             control_rate: float | None = None, duration: float = 60.0, scenario: str = 'paper', motor_lag_s: float = 0.0,
              disturbances: bool = True, seed: int = 1, max_error: float = 1.0, window: float = 10.0) -> Case:
-    """One embedded flight of ``kind`` with the given transport delay [s], sensor noise and control rate [Hz]."""
+    """One embedded flight of ``kind`` with the given transport delay [s], sensor noise, control rate [Hz] and
+    motor time constant [s] (physics at the control rate)."""
     params, dist = load_vehicle_file()
     gains = load_gains() if gains is None else gains
     if control_rate is not None:
@@ -89,6 +90,7 @@ def fly_case(kind: str, gains: dict | None = None, *, delay_s: float = 0.0, nois
     streams = flight_streams(seed, 0)
     perturbations = Perturbations(
         delay=TransportDelay.from_seconds(delay_s, 1.0 / rate) if delay_s > 0.0 else None,
+        motor_lag=MotorLag(motor_lag_s, 1.0 / rate) if motor_lag_s > 0.0 else None,
         sensor_noise=None if noise is None else SensorNoise(noise, SensorErrors(), streams.sensor_noise,
                                                             streams.sensor_bias))
     trajectory = make_scenario(scenario, None if scenario == 'waypoints' else duration)
