@@ -60,10 +60,13 @@ class NNIT2FSMCLaw:
 
     STATE = ('_teaching',)   #: what a retune keeps (nnit2fsmc_controller.tuning); the network's is its own
 
-    def __init__(self, lam: float, fuzzy: IT2FuzzyCorrector, network: EquivalentControlNetwork):
+    def __init__(self, lam: float, fuzzy: IT2FuzzyCorrector, network: EquivalentControlNetwork,
+                 bias_only: bool = False):
+        """``bias_only``: the network's only input is the constant 1 (ablation ``nnit2fsmc-bias``)."""
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
         self.fuzzy = fuzzy
         self.network = network
+        self.bias_only = bias_only
         self._teaching = None   #: fuzzy term the network has yet to learn from (0 where it must not learn)
 
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
@@ -71,7 +74,7 @@ class NNIT2FSMCLaw:
         xp = namespace_for(e)
         surface = de + self.lam * e
         corrective = self.fuzzy(surface)
-        equivalent = self.network.forward((ref_vel, ref_acc, 1.0))
+        equivalent = self.network.forward((1.0,) if self.bias_only else (ref_vel, ref_acc, 1.0))
         self._teaching = xp.where(xp.abs(surface) < self.fuzzy.input_scale, corrective, 0.0)
         return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
 

@@ -20,8 +20,22 @@ eq. (1) and a vertical specific force g,
 
 which reduces to theta_d = v_x / g, phi_d = -v_y / g at small angles and psi = 0. The tilt is
 limited to ``max_tilt``. The desired angle rates and accelerations the attitude surfaces need
-are obtained by first-order filtered differentiation of phi_d and theta_d (time constant
-``angle_filter_tau``).
+come from one of two sources (``attitude_rates``):
+
+* ``filter`` (the paper's structure): first-order filtered differentiation of phi_d and theta_d
+  (time constant ``angle_filter_tau``). phi_d and theta_d carry the position loop's feedback, so
+  sensor noise is differentiated twice.
+* ``flatness`` (differential flatness, Mellinger & Kumar 2011): split the desired attitude into
+  the attitude of the reference acceleration, phi_r = eq. (10) at (x_d'', y_d''), and the feedback
+  residual phi_d - phi_r. The rate and acceleration of phi_r are the exact time derivatives of
+  eq. (10) along the reference (reference jerk and snap, reference yaw rate and acceleration;
+  :meth:`CascadedController.flat_attitude_rates`); the residual, small and slow except while the
+  position loop corrects an error, is differentiated once by the filter. The surface uses
+  dphi_r + filtered d(residual)/dt; the law's reference inputs (the network's inputs, the
+  model-based equivalent control) are dphi_r and ddphi_r only: the network then sees the
+  reference motion, as in the position subsystems, and no feedback signal (with the filter's
+  derivatives of phi_d as inputs, learning adapts a feedback gain and limit-cycles under delay,
+  like the error inputs of docs/PAPER.md item 13).
 
 Nominal model used by the model-based baselines (the NNIT2FSMC ignores it): for each subsystem
 q'' = drift + gain v with, from eq. (1),
@@ -48,8 +62,10 @@ from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, controls_from_forces
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
 from .axis_laws import AxisOutput
+from .estimation import ComplementaryFilter
 
 AXES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
+ATTITUDE_RATES = ('flatness', 'filter')   #: sources of the desired roll/pitch rates (module docstring)
 
 
 class ControlOutput(NamedTuple):
@@ -65,7 +81,7 @@ def check_finite(t: float, state: Sequence, reference: ReferenceSample):
     """The numeric namespace of ``state``; ValueError if any value of the state or the reference is not finite."""
     xp = namespace_for(state[0])
     values = (*state, *reference.position, *reference.velocity, *reference.acceleration,
-              reference.yaw, reference.yaw_rate, reference.yaw_acceleration)
+              reference.yaw, reference.yaw_rate, reference.yaw_acceleration, *reference.jerk, *reference.snap)
     if not xp.all_finite(values):
         raise ValueError(f'non-finite state or reference at t={t}')
     return xp
@@ -102,10 +118,13 @@ class RateFilter:
 class CascadedController:
     """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws."""
 
-    STATE = ()   #: its state lives in its laws and rate filters (nnit2fsmc_controller.tuning)
+    STATE = ()   #: its state lives in its laws, rate filters and measurement filter (nnit2fsmc_controller.tuning)
 
     def __init__(self, name: str, params: VehicleParams, laws: dict, dt: float,
-                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority'):
+                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
+                 attitude_rates: str = 'filter', measurement_filter_hz: float = 0.0):
+        """``measurement_filter_hz`` > 0: the laws see position and angles through a complementary
+        filter of that crossover (:mod:`.estimation`); 0 feeds them the measurement as it is."""
         missing = [axis for axis in AXES if axis not in laws]
         if missing:
             raise ValueError(f'controller {name}: no law for axes {missing}')
@@ -116,6 +135,11 @@ class CascadedController:
         self.max_tilt = check_number('max_tilt', max_tilt, 0.0, 1.4, low_inclusive=False)
         tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
         self.allocation = check_allocation(allocation)
+        if attitude_rates not in ATTITUDE_RATES:
+            raise ParameterError(f'common.attitude_rates: {attitude_rates!r} is not one of {", ".join(ATTITUDE_RATES)}')
+        self.attitude_rates = attitude_rates
+        self.measurement_filter = (ComplementaryFilter(self.dt, measurement_filter_hz)
+                                   if check_number('measurement_filter_hz', measurement_filter_hz, 0.0) > 0.0 else None)
         self._max_horizontal = params.g * math.tan(self.max_tilt)
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
 
@@ -127,6 +151,8 @@ class CascadedController:
         """
         xp = check_finite(t, state, reference)
         p = self.params
+        if self.measurement_filter is not None:
+            state = self.measurement_filter(state)
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         (xd, yd, zd), (vxd, vyd, vzd), (axd, ayd, azd) = reference.position, reference.velocity, reference.acceleration
         laws = self.laws
@@ -138,16 +164,23 @@ class CascadedController:
 
         phi_d, theta_d = self.attitude_from_accelerations(out_x.value, out_y.value, psi)
         f = self._filters
-        dphi_d = f['dphi'].update(phi_d)
-        ddphi_d = f['ddphi'].update(dphi_d)
-        dtheta_d = f['dtheta'].update(theta_d)
-        ddtheta_d = f['ddtheta'].update(dtheta_d)
+        if self.attitude_rates == 'flatness':
+            phi_r, theta_r = self.attitude_from_accelerations(axd, ayd, psi)
+            dphi_r, ddphi_r, dtheta_r, ddtheta_r = self.flat_attitude_rates(
+                axd, ayd, reference.jerk[:2], reference.snap[:2], psi, reference.yaw_rate, reference.yaw_acceleration)
+            dphi_d = dphi_r + f['dphi'].update(phi_d - phi_r)
+            dtheta_d = dtheta_r + f['dtheta'].update(theta_d - theta_r)
+        else:
+            dphi_d = dphi_r = f['dphi'].update(phi_d)
+            ddphi_r = f['ddphi'].update(dphi_d)
+            dtheta_d = dtheta_r = f['dtheta'].update(theta_d)
+            ddtheta_r = f['ddtheta'].update(dtheta_d)
         psi_d = reference.yaw
 
-        out_phi = laws['phi'].update(phi - phi_d, dphi - dphi_d, dphi_d, ddphi_d,
+        out_phi = laws['phi'].update(phi - phi_d, dphi - dphi_d, dphi_r, ddphi_r,
                                      (dtheta * dpsi * (p.Iy - p.Iz) - p.Kfphi * xp.signed_square(dphi)) / p.Ix,
                                      p.d / p.Ix)
-        out_theta = laws['theta'].update(theta - theta_d, dtheta - dtheta_d, dtheta_d, ddtheta_d,
+        out_theta = laws['theta'].update(theta - theta_d, dtheta - dtheta_d, dtheta_r, ddtheta_r,
                                          (dphi * dpsi * (p.Iz - p.Ix) - p.Kftheta * xp.signed_square(dtheta)) / p.Iy,
                                          p.d / p.Iy)
         out_psi = laws['psi'].update(wrap_angle(psi - psi_d), dpsi - reference.yaw_rate, reference.yaw_rate,
@@ -176,17 +209,58 @@ class CascadedController:
         """The sliding-surface slopes lambda [1/s] of the subsystems, in AXES order (``control/diagnostics``)."""
         return tuple(self.laws[axis].lam for axis in AXES)
 
+    def _tilt_scale(self, ax, ay):
+        """Factor (<= 1) that brings the horizontal acceleration (ax, ay) [m/s^2] within the tilt limit."""
+        xp = namespace_for(ax, ay)
+        limit = self._max_horizontal
+        return limit / xp.maximum(xp.hypot(ax, ay), limit)
+
+    def flat_attitude_rates(self, ax, ay, jerk, snap, psi, dpsi, ddpsi):
+        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2]: the time derivatives of eq. (10) at
+        (ax, ay) [m/s^2] and yaw psi [rad] when the acceleration changes with ``jerk`` (jx, jy) [m/s^3]
+        and ``snap`` (sx, sy) [m/s^4] and the yaw with dpsi [rad/s], ddpsi [rad/s^2] (differential
+        flatness). Beyond the tilt limit the three are scaled like the acceleration.
+
+        With A = ax cos psi + ay sin psi, B = ax sin psi - ay cos psi, theta_d = atan(A / g) and
+        phi_d = atan(C), C = B cos(theta_d) / g:
+          A' = jA - dpsi B,  B' = jB + dpsi A  (jA, jB: the jerk rotated like (ax, ay))
+          A'' = sA - 2 dpsi jB - ddpsi B - dpsi^2 A,  B'' = sB + 2 dpsi jA + ddpsi A - dpsi^2 B
+          theta' = g A' / (g^2 + A^2),  theta'' = g A'' / (g^2 + A^2) - 2 g A A'^2 / (g^2 + A^2)^2
+          C' = (B' cos - B sin theta') / g,  C'' = (B'' cos - 2 B' sin theta' - B cos theta'^2 - B sin theta'') / g
+          phi' = C' / (1 + C^2),  phi'' = C'' / (1 + C^2) - 2 C C'^2 / (1 + C^2)^2
+        """
+        xp = namespace_for(ax, ay, psi)
+        scale = self._tilt_scale(ax, ay)
+        ax, ay = ax * scale, ay * scale
+        (jx, jy), (sx, sy) = jerk, snap
+        jx, jy, sx, sy = jx * scale, jy * scale, sx * scale, sy * scale
+        g = self.params.g
+        c, s = xp.cos(psi), xp.sin(psi)
+        a_, b_ = ax * c + ay * s, ax * s - ay * c
+        ja, jb = jx * c + jy * s, jx * s - jy * c
+        sa, sb = sx * c + sy * s, sx * s - sy * c
+        da, db = ja - dpsi * b_, jb + dpsi * a_
+        dda = sa - 2.0 * dpsi * jb - ddpsi * b_ - dpsi * dpsi * a_
+        ddb = sb + 2.0 * dpsi * ja + ddpsi * a_ - dpsi * dpsi * b_
+        q = g * g + a_ * a_
+        theta = xp.atan2(a_, g)
+        dtheta = g * da / q
+        ddtheta = g * dda / q - 2.0 * g * a_ * da * da / (q * q)
+        ct, st = xp.cos(theta), xp.sin(theta)
+        cc = b_ * ct / g
+        dc = (db * ct - b_ * st * dtheta) / g
+        ddc = (ddb * ct - 2.0 * db * st * dtheta - b_ * ct * dtheta * dtheta - b_ * st * ddtheta) / g
+        r = 1.0 + cc * cc
+        return dc / r, ddc / r - 2.0 * cc * dc * dc / (r * r), dtheta, ddtheta
+
     def attitude_from_accelerations(self, ax, ay, psi):
         """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi.
 
         Beyond the tilt limit the acceleration is scaled down to it, its direction kept.
         """
         xp = namespace_for(psi)
-        limit = self._max_horizontal
-        norm = xp.hypot(ax, ay)
-        beyond = norm > limit
-        divisor = xp.maximum(norm, limit)     # = norm wherever it is used: never a division by zero
-        ax, ay = xp.where(beyond, ax * limit / divisor, ax), xp.where(beyond, ay * limit / divisor, ay)
+        scale = self._tilt_scale(ax, ay)
+        ax, ay = ax * scale, ay * scale
         g = self.params.g
         cpsi, spsi = xp.cos(psi), xp.sin(psi)
         theta_d = xp.atan2(ax * cpsi + ay * spsi, g)

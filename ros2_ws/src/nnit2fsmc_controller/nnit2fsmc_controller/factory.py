@@ -10,14 +10,28 @@ from quad_msgs_bridge.mixer import ALLOCATIONS
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
 from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
-from .controller import AXES, CascadedController
-from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector
-from .neural_network import EquivalentControlNetwork
+from .controller import ATTITUDE_RATES, AXES, CascadedController
+from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector, SaturationCorrector
+from .neural_network import MODIFICATIONS, EquivalentControlNetwork
 from .se3 import SE3Controller
 
 DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controller.yaml'
-CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3')
+#: the NNIT2FSMC's ablations (docs/ADAPTIVE.md): the IT2 term replaced by -K sat(S / Phi), type-1 fuzzy
+#: (lower membership functions = upper ones), learning off, and a network whose only input is the bias
+ABLATIONS = ('nnit2fsmc-sat', 'nnit2fsmc-type1', 'nnit2fsmc-nolearn', 'nnit2fsmc-bias')
+CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3') + ABLATIONS
 NN_INPUTS = 3   # (ref_vel, ref_acc, 1), see NNIT2FSMCLaw
+#: the paper-faithful value of every key that changes the controller away from the paper (docs/ADAPTIVE.md);
+#: the learning rates per update are the per-second defaults times the default 1 ms period
+PAPER_FAITHFUL: dict = {
+    'common.attitude_rates': 'filter',
+    'nnit2fsmc.learning_rate_unit': 'per_update',
+    'nnit2fsmc.modification': 'none',
+    'nnit2fsmc.measurement_filter_hz': 0.0,
+    'nnit2fsmc.axes.x.learning_rate': 0.01, 'nnit2fsmc.axes.y.learning_rate': 0.01,
+    'nnit2fsmc.axes.z.learning_rate': 0.002, 'nnit2fsmc.axes.phi.learning_rate': 0.05,
+    'nnit2fsmc.axes.theta.learning_rate': 0.05, 'nnit2fsmc.axes.psi.learning_rate': 30.0,
+}
 
 
 def load_gains(path: str | Path | None = None) -> dict:
@@ -74,6 +88,23 @@ def control_period(gains: Mapping[str, Any]) -> float:
     return 1.0 / _positive(gains, 'common.control_rate')
 
 
+LEARNING_RATE_UNITS = ('per_second', 'per_update')
+
+
+def learning_rate(gains: Mapping[str, Any], axis: str, dt: float) -> float:
+    """The network's rate alpha per update for subsystem ``axis`` at control period ``dt`` [s].
+
+    ``nnit2fsmc.learning_rate_unit``: ``per_second`` (alpha of eqs. 6-7 is a rate per second, the
+    continuous-time adaptation gain; the step per update is alpha dt, so a change of control rate
+    keeps the adaptation speed) or ``per_update`` (the paper's discrete alpha, taken as is).
+    """
+    unit = _get(gains, 'nnit2fsmc.learning_rate_unit')
+    if unit not in LEARNING_RATE_UNITS:
+        raise ParameterError(f'nnit2fsmc.learning_rate_unit: {unit!r} is not one of {", ".join(LEARNING_RATE_UNITS)}')
+    alpha = _non_negative(gains, f'nnit2fsmc.axes.{axis}.learning_rate')
+    return alpha * dt if unit == 'per_second' else alpha
+
+
 def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] | None = None,
                      batch: int | None = None) -> CascadedController | SE3Controller:
     """A fresh controller of ``kind`` (one of CONTROLLERS) for the nominal vehicle ``params``.
@@ -91,25 +122,8 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
         se3_gains = {axis: tuple(_non_negative(gains, f'se3.axes.{axis}.{name}')
                                  for name in ('k_error', 'k_rate', 'k_integral', 'integral_limit')) for axis in AXES}
         return SE3Controller(kind, params, se3_gains, lam, dt, **structure)
-    if kind == 'nnit2fsmc':
-        hidden = int(_positive(gains, 'nnit2fsmc.hidden_units'))
-        seed = int(_non_negative(gains, 'nnit2fsmc.seed'))
-        laws = {}
-        for index, axis in enumerate(AXES):
-            key = f'nnit2fsmc.axes.{axis}'
-            fuzzy = IT2FuzzyCorrector(
-                input_scale=_positive(gains, f'{key}.input_scale'),
-                output_gain=_non_negative(gains, f'{key}.fuzzy_gain'),
-                lower_height=_positive(gains, 'nnit2fsmc.lower_height'),
-                lower_half_width=_positive(gains, 'nnit2fsmc.lower_half_width'),
-                type_reducer=_get(gains, 'nnit2fsmc.type_reducer'))
-            network = EquivalentControlNetwork(
-                n_inputs=NN_INPUTS, n_hidden=hidden,
-                output_gain=_positive(gains, f'{key}.nn_gain'),
-                learning_rate=_non_negative(gains, f'{key}.learning_rate'),
-                weight_limit=_positive(gains, 'nnit2fsmc.weight_limit'),
-                seed=seed * len(AXES) + index, batch=batch)
-            laws[axis] = NNIT2FSMCLaw(lam[axis], fuzzy, network)
+    if kind == 'nnit2fsmc' or kind in ABLATIONS:
+        laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch) for axis in AXES}
     elif kind in ('smc-sign', 'smc-sat'):
         laws = {axis: SlidingModeLaw(
             lam[axis], _non_negative(gains, f'smc.switching_gain.{axis}'),
@@ -134,7 +148,39 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
             dt=dt) for axis in AXES}
     else:
         raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
-    return CascadedController(kind, params, laws, dt, **structure)
+    return CascadedController(
+        kind, params, laws, dt, **structure,
+        attitude_rates=_get(gains, 'common.attitude_rates'),
+        measurement_filter_hz=(_non_negative(gains, 'nnit2fsmc.measurement_filter_hz')
+                               if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0))
+
+
+def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt: float,
+                  batch: int | None) -> NNIT2FSMCLaw:
+    """The NNIT2FSMC law of subsystem ``axis``, or of one of its ABLATIONS (``kind``)."""
+    key = f'nnit2fsmc.axes.{axis}'
+    input_scale = _positive(gains, f'{key}.input_scale')
+    fuzzy_gain = _non_negative(gains, f'{key}.fuzzy_gain')
+    if kind == 'nnit2fsmc-sat':
+        fuzzy = SaturationCorrector(input_scale, fuzzy_gain)
+    else:
+        type1 = kind == 'nnit2fsmc-type1'   # lower MFs equal to the upper ones: height 1, half-width 0.5
+        fuzzy = IT2FuzzyCorrector(
+            input_scale=input_scale, output_gain=fuzzy_gain,
+            lower_height=1.0 if type1 else _positive(gains, 'nnit2fsmc.lower_height'),
+            lower_half_width=0.5 if type1 else _positive(gains, 'nnit2fsmc.lower_half_width'),
+            type_reducer=_get(gains, 'nnit2fsmc.type_reducer'))
+    modification = _get(gains, 'nnit2fsmc.modification')
+    network = EquivalentControlNetwork(
+        n_inputs=1 if kind == 'nnit2fsmc-bias' else NN_INPUTS,
+        n_hidden=int(_positive(gains, 'nnit2fsmc.hidden_units')),
+        output_gain=_positive(gains, f'{key}.nn_gain'),
+        learning_rate=0.0 if kind == 'nnit2fsmc-nolearn' else learning_rate(gains, axis, dt),
+        weight_limit=_positive(gains, 'nnit2fsmc.weight_limit'),
+        seed=int(_non_negative(gains, 'nnit2fsmc.seed')) * len(AXES) + AXES.index(axis), batch=batch,
+        modification=modification,
+        leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0)
+    return NNIT2FSMCLaw(lam, fuzzy, network, bias_only=kind == 'nnit2fsmc-bias')
 
 
 def flatten_gains(gains: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
@@ -168,6 +214,10 @@ GAIN_DESCRIPTIONS = {
     'angle_filter_tau': 'time constant of the desired-angle differentiation filter [s]',
     'allocation': 'rotor limits: priority (U1 kept, then roll/pitch scaled to fit, yaw last) or clip (each rotor '
                   'clipped, paper-faithful)',
+    'attitude_rates': 'desired roll/pitch rates: flatness (from the reference jerk and snap) or filter (paper)',
+    'measurement_filter_hz': 'crossover of the complementary filter of measured position and angles [Hz] (0: none, paper)',
+    'modification': 'leakage of the NN learning: none (paper), sigma (sigma-modification) or e (e-modification)',
+    'leakage': 'leakage rate sigma of the sigma- or e-modification [1/s]',
     'lambda': 'sliding-surface slope lambda of S = de + lambda e [1/s]',
     'type_reducer': 'IT2 type reduction: km (exact Karnik-Mendel) or nie-tan',
     'lower_height': 'height of the lower membership functions, in (0, 1]',
@@ -178,7 +228,8 @@ GAIN_DESCRIPTIONS = {
     'input_scale': 'sliding-surface value that saturates the fuzzy input [units of S]',
     'fuzzy_gain': 'IT2 fuzzy corrective output gain [units of the subsystem control]',
     'nn_gain': 'NN output gain K_eq [units of the subsystem control]',
-    'learning_rate': 'NN learning rate alpha of eqs. (6)-(7), per update',
+    'learning_rate': 'NN learning rate alpha of eqs. (6)-(7), per second or per update (learning_rate_unit)',
+    'learning_rate_unit': 'unit of the learning rates: per_second (alpha dt per update) or per_update (paper)',
     'boundary_layer': 'smc-sat boundary-layer width [units of S]',
     'switching_gain': 'SMC switching gain [units of the second derivative of the subsystem]',
     'kp': 'PID proportional gain', 'ki': 'PID integral gain', 'kd': 'PID derivative gain',
@@ -196,6 +247,9 @@ GAIN_DESCRIPTIONS = {
 GAIN_CHOICES = {
     'type_reducer': TYPE_REDUCERS,
     'allocation': ALLOCATIONS,
+    'attitude_rates': ATTITUDE_RATES,
+    'learning_rate_unit': LEARNING_RATE_UNITS,
+    'modification': MODIFICATIONS,
 }
 
 

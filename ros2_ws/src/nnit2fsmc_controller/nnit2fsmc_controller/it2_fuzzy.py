@@ -111,3 +111,17 @@ class IT2FuzzyCorrector:
         w_k, w_k1 = lower_k + upper_k, lower_k1 + upper_k1
         return self.output_gain * (w_k * xp.take(self.consequents, k) + w_k1 * xp.take(self.consequents, k + 1.0)) \
             / (w_k + w_k1)
+
+
+class SaturationCorrector:
+    """The linear saturation the IT2 term is compared with (ablation ``nnit2fsmc-sat``):
+    u = -output_gain * sat(S / input_scale), sat(u) = clip(u, -1, 1)."""
+
+    STATE = ()
+
+    def __init__(self, input_scale: float, output_gain: float):
+        self.input_scale = check_number('input_scale', input_scale, 0.0, low_inclusive=False)
+        self.output_gain = check_number('output_gain', output_gain, 0.0)
+
+    def __call__(self, s):
+        return -self.output_gain * namespace_for(s).clip(s / self.input_scale, -1.0, 1.0)

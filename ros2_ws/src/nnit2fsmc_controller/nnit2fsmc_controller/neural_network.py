@@ -14,6 +14,17 @@ the fuzzy corrective term, so gradient descent with rate alpha gives
 Every weight is projected back onto [-weight_limit, weight_limit] after each update, so online
 learning cannot diverge whatever the fuzzy term does.
 
+Optional leakage (robust adaptive control; docs/ADAPTIVE.md) of every weight W towards its initial
+value W0 (Wz: the seeded values, Wy: 0), with ``leakage`` l the share per update (sigma dt for a
+leakage rate sigma [1/s]):
+
+    sigma-modification (Ioannou & Kokotovic 1983):   W -= l * (W - W0)
+    e-modification (Narendra & Annaswamy 1987):      W -= l * |U_fuzzy| / K_eq * (W - W0)
+
+so that, without persistent teaching, the weights relax back instead of drifting. (The classical
+forms scale the leakage by the adaptation gain too; here it is a rate of its own, because the
+per-subsystem rates alpha span four decades and alpha sigma > 1 would make the leakage unstable.)
+
 Each equation is written once, in :class:`EquivalentControlNetwork`, on top of a small layer
 algebra with two implementations of the same four operations: :class:`ListLayers` for one vehicle
 (lists of plain floats: one network per subsystem has a few dozen weights, and pure Python is far
@@ -31,7 +42,9 @@ from typing import Sequence
 import numpy as np
 
 from quad_msgs_bridge.numeric import BATCH, SCALAR, is_batch
-from quad_msgs_bridge.vehicle_params import check_number
+from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+
+MODIFICATIONS = ('none', 'sigma', 'e')   #: leakage of the learning law (module docstring)
 
 
 def bipolar_sigmoid(x: float) -> float:
@@ -70,6 +83,12 @@ class ListLayers:
         """w_j - step_j, clipped to [-limit, limit]."""
         return SCALAR.project([w - step for w, step in zip(vector, steps)], limit)
 
+    @staticmethod
+    def relax(weights: list, anchor: list, factor) -> list:
+        """W - factor (W - W0), elementwise, for a vector or a matrix (list of rows)."""
+        return [ListLayers.relax(w, a, factor) if isinstance(w, list) else w - factor * (w - a)
+                for w, a in zip(weights, anchor)]
+
 
 class ArrayLayers:
     """The same operations for B vehicles: the last axis of every array is the vehicle."""
@@ -101,6 +120,10 @@ class ArrayLayers:
     def step(vector: np.ndarray, steps: np.ndarray, limit: float) -> np.ndarray:
         return np.clip(vector - steps, -limit, limit)
 
+    @staticmethod
+    def relax(weights: np.ndarray, anchor: np.ndarray, factor) -> np.ndarray:
+        return weights - factor * (weights - anchor)
+
 
 class EquivalentControlNetwork:
     """U_eq_hat = K_eq g(Wy . g(Wz Z)); online gradient learning from the fuzzy term."""
@@ -110,11 +133,16 @@ class EquivalentControlNetwork:
 
     def __init__(self, n_inputs: int, n_hidden: int, output_gain: float, learning_rate: float,
                  weight_limit: float = 10.0, initial_spread: float = 0.5, seed: int = 0,
-                 batch: int | None = None):
-        """``batch``: None for one vehicle (float weights), else the number of vehicles B (array weights)."""
+                 batch: int | None = None, modification: str = 'none', leakage: float = 0.0):
+        """``batch``: None for one vehicle (float weights), else the number of vehicles B (array weights).
+        ``modification``: one of MODIFICATIONS, with ``leakage`` the share per update, in [0, 1) (module docstring)."""
         self.output_gain = check_number('output_gain', output_gain, 0.0, low_inclusive=False)
         self.learning_rate = check_number('learning_rate', learning_rate, 0.0)
         self.weight_limit = check_number('weight_limit', weight_limit, 0.0, low_inclusive=False)
+        if modification not in MODIFICATIONS:
+            raise ParameterError(f'modification: {modification!r} is not one of {", ".join(MODIFICATIONS)}')
+        self.modification = modification
+        self.leakage = check_number('leakage', leakage, 0.0, 1.0, high_inclusive=False) if modification != 'none' else 0.0
         if n_inputs < 1 or n_hidden < 1:
             raise ValueError(f'network needs at least one input and one hidden unit, got {n_inputs}, {n_hidden}')
         rng = random.Random(seed)
@@ -126,6 +154,8 @@ class EquivalentControlNetwork:
         self.hidden_weights = self.layers.weights(initial_hidden, batch)
         #: output weights Wy[j]: zero, so the network starts knowing nothing (U_eq_hat = 0)
         self.output_weights = self.layers.weights([0.0] * n_hidden, batch)
+        #: anchors W0 of the leakage: the initial weights
+        self._hidden_anchor, self._output_anchor = self.hidden_weights, self.output_weights
         self._inputs: Sequence = (0.0,) * n_inputs
         self._hidden = self.layers.weights([0.0] * n_hidden, batch)
         self._output = 0.0 if batch is None else np.zeros(batch)
@@ -161,12 +191,17 @@ class EquivalentControlNetwork:
         signal changes no weight (every gradient is proportional to it): one vehicle then skips the
         arithmetic.
         """
-        if self.learning_rate == 0.0 or (not is_batch(u_fuzzy) and u_fuzzy == 0.0):
+        sigma = self.leakage
+        if self.learning_rate == 0.0 or (not is_batch(u_fuzzy) and u_fuzzy == 0.0
+                                         and (sigma == 0.0 or self.modification == 'e')):
             return
         layers, alpha, limit = self.layers, self.learning_rate, self.weight_limit
         output_factors, hidden_factors = self._error_factors(u_fuzzy)
-        self.hidden_weights = layers.outer_step(self.hidden_weights,
-                                                layers.elementwise(lambda f: alpha * f, hidden_factors),
+        hidden, output = self.hidden_weights, self.output_weights
+        if sigma > 0.0:
+            factor = sigma * (abs(u_fuzzy) / self.output_gain if self.modification == 'e' else 1.0)
+            hidden = layers.relax(hidden, self._hidden_anchor, factor)
+            output = layers.relax(output, self._output_anchor, factor)
+        self.hidden_weights = layers.outer_step(hidden, layers.elementwise(lambda f: alpha * f, hidden_factors),
                                                 self._inputs, limit)
-        self.output_weights = layers.step(self.output_weights,
-                                          layers.elementwise(lambda f: alpha * f, output_factors), limit)
+        self.output_weights = layers.step(output, layers.elementwise(lambda f: alpha * f, output_factors), limit)

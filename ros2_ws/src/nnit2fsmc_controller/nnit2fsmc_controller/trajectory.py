@@ -1,4 +1,4 @@
-"""Reference trajectories: sampled at time t into position, velocity, acceleration and yaw.
+"""Reference trajectories: sampled at time t into position, velocity, acceleration, jerk, snap and yaw.
 
 Every trajectory has ``initial_state`` (the rest state the vehicle starts from, on the ground
 under the first reference point) and ``duration`` [s] (the length of the path; after it the
@@ -27,7 +27,8 @@ class Helix:
     x_d = R cos(w t), y_d = R sin(w t), z_d = z0 + c t, psi_d = w t (wrapped to [-pi, pi)):
     the nose turns with the circle, so the position loop must account for yaw (eq. 10).
     Defaults: R = 1 m, w = 0.5 rad/s, z0 = 0 m, c = 0.1 m/s; the vehicle starts at rest on the
-    ground at (R, 0, 0) and the reference leaves with velocity (0, R w, c).
+    ground at (R, 0, 0) and the reference leaves with velocity (0, R w, c). Jerk and snap are the
+    analytic derivatives (R w^3 (sin, -cos), R w^4 (cos, sin)).
     """
 
     radius: float = 1.0        #: [m]
@@ -46,7 +47,9 @@ class Helix:
             velocity=(-r * w * s * moving, r * w * c * moving, self.climb_rate * moving),
             acceleration=(-r * w * w * c * moving, -r * w * w * s * moving, 0.0),
             yaw=(w * t + math.pi) % (2.0 * math.pi) - math.pi,
-            yaw_rate=w * moving)
+            yaw_rate=w * moving,
+            jerk=(r * w ** 3 * s * moving, -r * w ** 3 * c * moving, 0.0),
+            snap=(r * w ** 4 * c * moving, r * w ** 4 * s * moving, 0.0))
 
     @property
     def initial_state(self) -> list[float]:
@@ -104,12 +107,15 @@ class Steps:
         return _rest_state_below(self.sample(0.0))
 
 
-def _quintic_blend(tau: float) -> tuple[float, float, float]:
-    """Minimum-jerk blend s(tau) on [0, 1] with ds/dtau and d2s/dtau2; zero rate and acceleration at both ends."""
+def _quintic_blend(tau: float) -> tuple[float, float, float, float, float]:
+    """Minimum-jerk blend s(tau) on [0, 1] and its first four derivatives in tau; zero rate and
+    acceleration at both ends."""
     s = tau * tau * tau * (10.0 + tau * (-15.0 + 6.0 * tau))
     ds = 30.0 * tau * tau * (1.0 - tau) ** 2
     dds = 60.0 * tau * (1.0 - tau) * (1.0 - 2.0 * tau)
-    return s, ds, dds
+    d3s = 60.0 + tau * (-360.0 + 360.0 * tau)
+    d4s = -360.0 + 720.0 * tau
+    return s, ds, dds, d3s, d4s
 
 
 @dataclass(frozen=True)
@@ -142,7 +148,7 @@ class Waypoints:
         for (t0, p0, yaw0), (t1, p1, yaw1) in zip(self.points, self.points[1:]):
             if t < t1:
                 span = t1 - t0
-                s, ds, dds = _quintic_blend((t - t0) / span)
+                s, ds, dds, d3s, d4s = _quintic_blend((t - t0) / span)
                 delta = [b - a for a, b in zip(p0, p1)]
                 return ReferenceSample(
                     position=tuple(a + s * dp for a, dp in zip(p0, delta)),
@@ -150,8 +156,65 @@ class Waypoints:
                     acceleration=tuple(dds / (span * span) * dp for dp in delta),
                     yaw=yaw0 + s * (yaw1 - yaw0),
                     yaw_rate=ds / span * (yaw1 - yaw0),
-                    yaw_acceleration=dds / (span * span) * (yaw1 - yaw0))
+                    yaw_acceleration=dds / (span * span) * (yaw1 - yaw0),
+                    jerk=tuple(d3s / span ** 3 * dp for dp in delta),
+                    snap=tuple(d4s / span ** 4 * dp for dp in delta))
         return hold(self.points[-1][1], self.points[-1][2])
+
+    @property
+    def initial_state(self) -> list[float]:
+        return _rest_state_below(self.sample(0.0))
+
+
+def _compose(derivatives: tuple, phase: tuple) -> tuple:
+    """Value and first four time derivatives of f(theta(t)) (Faa di Bruno's formula), from the
+    derivatives (f, df, d2f, d3f, d4f) of f at theta and (theta, dtheta, ..., d4theta) at t."""
+    f0, f1, f2, f3, f4 = derivatives
+    _, t1, t2, t3, t4 = phase
+    return (f0, f1 * t1, f2 * t1 ** 2 + f1 * t2, f3 * t1 ** 3 + 3.0 * f2 * t1 * t2 + f1 * t3,
+            f4 * t1 ** 4 + 6.0 * f3 * t1 ** 2 * t2 + f2 * (3.0 * t2 ** 2 + 4.0 * t1 * t3) + f1 * t4)
+
+
+@dataclass(frozen=True)
+class Lemniscate:
+    """An aggressive figure-eight (lemniscate of Gerono) at constant height and heading.
+
+    x_d = a sin(theta), y_d = (a / 2) sin(2 theta), z_d = height, psi_d = yaw, with the phase theta(t)
+    accelerating from rest to the rate w over ``ramp_time`` T by a minimum-jerk profile of the rate
+    (dtheta/dt = w s(t / T), s the quintic blend), then theta = w (t - T / 2). Position, velocity,
+    acceleration, jerk and snap are analytic (chain rule through the phase). Defaults: a = 2 m,
+    w = 1 rad/s: peak speed a w sqrt(2) = 2.83 m/s (at the crossing), peak acceleration 2 a w^2
+    = 4 m/s^2 on y. The vehicle starts at rest on the ground below (0, 0, height).
+    """
+
+    amplitude: float = 2.0      #: a [m]
+    rate: float = 1.0           #: w [rad/s]
+    height: float = 1.0         #: [m]
+    yaw: float = 0.0            #: [rad]
+    ramp_time: float = 4.0      #: T [s]
+    duration: float = 40.0      #: [s]
+
+    def phase(self, t: float) -> tuple:
+        """theta [rad] and its first four time derivatives at t [s] (0 <= t)."""
+        w, ramp = self.rate, self.ramp_time
+        if t >= ramp:
+            return (w * (t - 0.5 * ramp), w, 0.0, 0.0, 0.0)
+        tau = max(t, 0.0) / ramp
+        s, ds, dds, d3s, _ = _quintic_blend(tau)
+        integral = tau ** 4 * (2.5 + tau * (-3.0 + tau))     # int_0^tau s
+        return (w * ramp * integral, w * s, w * ds / ramp, w * dds / ramp ** 2, w * d3s / ramp ** 3)
+
+    def sample(self, t: float) -> ReferenceSample:
+        phase = self.phase(min(t, self.duration))
+        if t > self.duration:
+            phase = (phase[0], 0.0, 0.0, 0.0, 0.0)
+        a, theta = self.amplitude, phase[0]
+        sin1, cos1, sin2, cos2 = math.sin(theta), math.cos(theta), math.sin(2.0 * theta), math.cos(2.0 * theta)
+        x = _compose((a * sin1, a * cos1, -a * sin1, -a * cos1, a * sin1), phase)
+        y = _compose((0.5 * a * sin2, a * cos2, -2.0 * a * sin2, -4.0 * a * cos2, 8.0 * a * sin2), phase)
+        return ReferenceSample(
+            position=(x[0], y[0], self.height), velocity=(x[1], y[1], 0.0), acceleration=(x[2], y[2], 0.0),
+            yaw=self.yaw, jerk=(x[3], y[3], 0.0), snap=(x[4], y[4], 0.0))
 
     @property
     def initial_state(self) -> list[float]:
@@ -182,7 +245,7 @@ class Shifted:
         return state
 
 
-SCENARIOS = {'paper': Helix, 'hover': Hover, 'steps': Steps, 'waypoints': Waypoints}
+SCENARIOS = {'paper': Helix, 'hover': Hover, 'steps': Steps, 'waypoints': Waypoints, 'lemniscate': Lemniscate}
 
 
 def make_scenario(name: str, duration: float | None = None, offset: Vec3 = (0.0, 0.0, 0.0)):

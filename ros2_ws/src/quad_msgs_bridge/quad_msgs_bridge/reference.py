@@ -4,6 +4,8 @@ A ``setpoints`` message carries a SetpointPath: one point means "hold it"; sever
 path starting at the header stamp. Between points the reference is the quintic Hermite
 interpolant of position, velocity and acceleration at both ends (exact for polynomials up to
 degree five), so a path sampled at a modest rate reproduces a smooth trajectory to round-off.
+The message carries no jerk or snap: a sampled path gives those of its interpolant (its third and
+fourth derivatives), a held point zeros.
 """
 from __future__ import annotations
 
@@ -23,6 +25,8 @@ class ReferenceSample(NamedTuple):
     yaw: float                     #: [rad]
     yaw_rate: float = 0.0          #: [rad/s]
     yaw_acceleration: float = 0.0  #: [rad/s^2]
+    jerk: Vec3 = (0.0, 0.0, 0.0)   #: [m/s^3, world ENU] (zeros where a source has none)
+    snap: Vec3 = (0.0, 0.0, 0.0)   #: [m/s^4, world ENU] (zeros where a source has none)
 
 
 def hold(position: Sequence[float], yaw: float = 0.0) -> ReferenceSample:
@@ -50,6 +54,18 @@ def _quintic(p0, v0, a0, p1, v1, a1, h, s):
              + 0.5 * (2.0 - 18.0 * s + 36.0 * s2 - 20.0 * s3) * a0 + 0.5 * (6.0 * s - 24.0 * s2 + 20.0 * s3) * a1
              + (-24.0 * s + 84.0 * s2 - 60.0 * s3) * v1 / h + (60.0 * s - 180.0 * s2 + 120.0 * s3) * p1 / (h * h))
     return value, rate, accel
+
+
+def _quintic_jerk_snap(p0, v0, a0, p1, v1, a1, h, s):
+    """Third and fourth time derivatives of the interpolant of :func:`_quintic` at s in [0, 1]."""
+    s2 = s * s
+    jerk = ((-60.0 + 360.0 * s - 360.0 * s2) * (p0 - p1) / h ** 3
+            + (-36.0 + 192.0 * s - 180.0 * s2) * v0 / h ** 2 + (-24.0 + 168.0 * s - 180.0 * s2) * v1 / h ** 2
+            + 0.5 * (-18.0 + 72.0 * s - 60.0 * s2) * a0 / h + 0.5 * (6.0 - 48.0 * s + 60.0 * s2) * a1 / h)
+    snap = ((360.0 - 720.0 * s) * (p0 - p1) / h ** 4 + (192.0 - 360.0 * s) * v0 / h ** 3
+            + (168.0 - 360.0 * s) * v1 / h ** 3 + 0.5 * (72.0 - 120.0 * s) * a0 / h ** 2
+            + 0.5 * (-48.0 + 120.0 * s) * a1 / h ** 2)
+    return jerk, snap
 
 
 class SetpointPath:
@@ -100,8 +116,10 @@ class SetpointPath:
         a, b = points[i], points[i + 1]
         h = times[i + 1] - times[i]
         s = (t - times[i]) / h
-        axes = [_quintic(a.position[k], a.velocity[k], a.acceleration[k],
-                         b.position[k], b.velocity[k], b.acceleration[k], h, s) for k in range(3)]
+        ends = [(a.position[k], a.velocity[k], a.acceleration[k], b.position[k], b.velocity[k], b.acceleration[k])
+                for k in range(3)]
+        axes = [_quintic(*end, h, s) for end in ends]
+        higher = [_quintic_jerk_snap(*end, h, s) for end in ends]
         yaw_end = a.yaw + _wrap(b.yaw - a.yaw)
         yaw, yaw_rate, yaw_acc = _quintic(a.yaw, a.yaw_rate, a.yaw_acceleration,
                                           yaw_end, b.yaw_rate, b.yaw_acceleration, h, s)
@@ -109,4 +127,5 @@ class SetpointPath:
             position=(axes[0][0], axes[1][0], axes[2][0]),
             velocity=(axes[0][1], axes[1][1], axes[2][1]),
             acceleration=(axes[0][2], axes[1][2], axes[2][2]),
-            yaw=_wrap(yaw), yaw_rate=yaw_rate, yaw_acceleration=yaw_acc)
+            yaw=_wrap(yaw), yaw_rate=yaw_rate, yaw_acceleration=yaw_acc,
+            jerk=(higher[0][0], higher[1][0], higher[2][0]), snap=(higher[0][1], higher[1][1], higher[2][1]))

@@ -20,7 +20,7 @@ SETTLE_TIME = 5.0           #: [s] take-off and convergence left out of the metr
 SHARE_WINDOW = 5.0          #: [s] windows of the fuzzy share in the metrics
 #: controllers whose corrective term (``control/diagnostics``) is the IT2 fuzzy term; that of the sliding
 #: mode baselines is their switching term, that of the PID zero, so they have no fuzzy share
-FUZZY_CONTROLLERS = ('nnit2fsmc',)
+FUZZY_CONTROLLERS = ('nnit2fsmc', 'nnit2fsmc-type1', 'nnit2fsmc-nolearn', 'nnit2fsmc-bias')
 
 
 def default_settle_time(duration: float) -> float:
