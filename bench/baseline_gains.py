@@ -127,6 +127,12 @@ def derive(gains, params, disturbances, spec):
     return (slope, r_min, r_max, delta, rows), sections
 
 
+def yaml_float(value: float) -> str:
+    """4 significant digits, always a YAML float (16.0, not 16: a ROS parameter keeps its first type)."""
+    text = f'{value:.4g}'
+    return text if any(c in text for c in '.e') else text + '.0'
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--gains', type=Path, default=None, help='NNIT2FSMC gains file (default: the packaged one)')
@@ -148,7 +154,7 @@ def main(argv=None) -> int:
     for section, per_axis in sections.items():
         print(f'\n    {section}:\n      axes:')
         for axis, values in per_axis.items():
-            text = ', '.join(f'{key}: {value:.4g}' for key, value in values.items())
+            text = ', '.join(f'{key}: {yaml_float(value)}' for key, value in values.items())
             print(f'        {axis + ":":6} {{{text}}}')
     return 0
 

@@ -139,14 +139,15 @@ def test_hover_holds_under_disturbances(scenario_flights):
     record = scenario_flights['hover']
     assert_physical(record)
     metrics = flight_metrics(record, SETTLE, PARAMS.F_min, PARAMS.F_max)
-    assert metrics['max_position_error_m'] < 0.001    # 0.11 mm today
+    assert metrics['max_position_error_m'] < 0.002    # 1.3 mm today (0.11 mm before the retune for motor lag)
 
 
 def test_waypoints_are_followed(scenario_flights):
     record = scenario_flights['waypoints']
     assert_physical(record)
     metrics = flight_metrics(record, SETTLE, PARAMS.F_min, PARAMS.F_max)
-    assert metrics['max_position_error_m'] < 0.03     # 1.5 cm today on 2 m legs flown in 4 s
+    assert metrics['max_position_error_m'] < 0.05     # 3.7 cm today on 2 m legs flown in 4 s (1.5 cm before
+    # the horizontal fuzzy slope was halved for motor lag, docs/PAPER.md section 3)
     assert metrics['rmse_position_m'] < 0.01          # 3.8 mm today
     error = np.linalg.norm(record.position[-1] - record.reference_position[-1])
     assert error < 0.001

@@ -437,6 +437,7 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
     """Live tuning over real topics: refused sets say why, an accepted lambda_z defines S_z from the next update
     (S_z = vz + lambda_z (z - z_d) on a hover, checked against the odometry), diagnostics carry the new lambda,
     and the z network goes on from its learned weights."""
+    from nnit2fsmc_controller.factory import load_gains
     from quad_msgs_bridge.conversions import diagnostics_from_msg
     namespace = 'live_tuning'
     kit = rclpy_kit()
@@ -455,7 +456,9 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
     processes = [
         node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
                      {'scenario': 'hover', 'start_time': 0.0, 'use_sim_time': True}),
-        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {'use_sim_time': True}),
+        # the surface is checked against the raw odometry: no measurement filter in between
+        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace,
+                     {'use_sim_time': True, 'nnit2fsmc.measurement_filter_hz': 0.0}),
         node_process('sim', 'quad_sim.sim_node', namespace,
                      {'duration': 3.0, 'initial_state': start, 'wait_for_subscribers': 2}),
     ]
@@ -478,14 +481,15 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
     count = min(len(wrench_stamps), len(diagnostics))
     steps = list(zip(wrench_stamps[-count:], diagnostics[-count:]))          # paired by order, as the contract says
     assert count > 2000
+    packaged = load_gains()['common']['lambda']
     lambdas = [slopes[2] for _, (_, _, _, slopes) in steps]
-    switch = next(k for k, value in enumerate(lambdas) if value != 3.0)
-    assert set(lambdas[:switch]) == {3.0} and set(lambdas[switch:]) == {8.0}
+    switch = next(k for k, value in enumerate(lambdas) if value != packaged['z'])
+    assert set(lambdas[:switch]) == {packaged['z']} and set(lambdas[switch:]) == {8.0} and packaged['z'] != 8.0
     switched_at = steps[switch][0]
     assert set_at <= switched_at <= set_at + 0.5e9     # from the next update after the set (lockstep goes on)
     for stamp, (surfaces, equivalent, _, slopes) in steps:
         state = state_from_odometry(odometry[stamp])
-        assert slopes[:2] + slopes[3:] == [3.0, 3.0, 12.0, 12.0, 4.0]
+        assert slopes[:2] + slopes[3:] == [packaged[axis] for axis in ('x', 'y', 'phi', 'theta', 'psi')]
         assert surfaces[2] == pytest.approx(state[5] + slopes[2] * (state[2] - 1.0), rel=1e-9, abs=1e-12)
     z_error = state_from_odometry(odometry[switched_at])[2] - 1.0
     assert abs(z_error) > 1e-3          # the two slopes give different surfaces here: the check discriminates
