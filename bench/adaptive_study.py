@@ -16,7 +16,7 @@ import sys
 
 import yaml
 
-from delay_margin import CAMPAIGN_NOISE, fly_case, unstable
+from study_flights import CAMPAIGN_NOISE, fly_case, unstable
 from nnit2fsmc_controller.factory import PAPER_FAITHFUL, flatten_gains, load_gains, unflatten_gains
 from quad_sim.perturbations.sensor_noise import SensorErrors
 

@@ -13,7 +13,8 @@ flight shorter than 10 s). A flight fails (and its row says so) when the vehicle
 flips, crashes or strays more than 1 m from the reference after settling (``api.fly``'s default).
 
 Controllers: ``--controllers a,b`` or every kind of ``nnit2fsmc_controller.factory.CONTROLLERS``
-at run time. Scenarios: names of ``nnit2fsmc_controller.trajectory.SCENARIOS`` (``paper`` is the
+at run time; ``KIND:faithful`` flies a kind with the paper-faithful settings of
+``factory.PAPER_FAITHFUL`` (docs/ADAPTIVE.md) applied to the packaged gains. Scenarios: names of ``nnit2fsmc_controller.trajectory.SCENARIOS`` (``paper`` is the
 60 s helix); a name not known there is skipped with a note under its table. ``--duration``
 shortens every flight (default: each scenario's own length).
 
@@ -119,18 +120,29 @@ class Outcome:
         return self.tail_chattering['U2'] + self.tail_chattering['U3']
 
 
-def gains_for(control_rate: float | None) -> dict:
-    """The packaged gains, at ``control_rate`` [Hz] if given (nothing else changed)."""
+FAITHFUL = ':faithful'   #: controller suffix: the paper-faithful settings
+
+
+def gains_for(control_rate: float | None, faithful: bool = False) -> dict:
+    """The packaged gains (with factory.PAPER_FAITHFUL if ``faithful``), at ``control_rate`` [Hz] if given."""
     gains = factory.load_gains()
+    if faithful:
+        gains = factory.unflatten_gains({**factory.flatten_gains(gains), **factory.PAPER_FAITHFUL})
     if control_rate is not None:
         gains['common'] = {**gains['common'], 'control_rate': float(control_rate)}
     return gains
 
 
+def kind_of(controller: str) -> str:
+    """The controller kind of a table row (``nnit2fsmc:faithful`` -> ``nnit2fsmc``)."""
+    return controller.removesuffix(FAITHFUL)
+
+
 def fly(flight: Flight) -> Outcome:
     """Fly ``flight`` on the embedded backend and take its figures."""
     params, disturbances = load_vehicle_file()
-    gains = gains_for(flight.control_rate)
+    kind, faithful = kind_of(flight.controller), flight.controller.endswith(FAITHFUL)
+    gains = gains_for(flight.control_rate, faithful)
     control_dt = factory.control_period(gains)
     path = trajectories.make_scenario(flight.scenario, flight.duration)
     duration = path.duration if flight.duration is None else flight.duration
@@ -141,10 +153,10 @@ def fly(flight: Flight) -> Outcome:
         noise = SensorNoise(NOISE, SensorErrors(), streams.sensor_noise, streams.sensor_bias)
     perturbations = Perturbations(sensor_noise=noise,
                                   delay=TransportDelay(flight.delay_steps) if flight.delay_steps else None)
-    result = fly_embedded(flight.controller, path, params, disturbances, gains, duration, PHYSICS_RATE,
+    result = fly_embedded(kind, path, params, disturbances, gains, duration, PHYSICS_RATE,
                           perturbations=perturbations, rules=FailureRules(settle, MAX_ERROR))
     failed = result.failure is not None
-    figures = dict(f_min=params.F_min, f_max=params.F_max, fuzzy_term=has_fuzzy_term(flight.controller),
+    figures = dict(f_min=params.F_min, f_max=params.F_max, fuzzy_term=has_fuzzy_term(kind),
                    ended_early=failed)
     metrics = flight_metrics(result.record, settle, **figures)
     tail = flight_metrics(result.record, max(settle, duration - control_dt - TAIL), **figures)
@@ -381,7 +393,7 @@ def main(argv=None) -> int:
     experiments = names(args.experiments)
     unknown = [e for e in experiments if e not in EXPERIMENTS]
     controllers = names(args.controllers) if args.controllers else list(factory.CONTROLLERS)
-    unknown += [c for c in controllers if c not in factory.CONTROLLERS]
+    unknown += [c for c in controllers if kind_of(c) not in factory.CONTROLLERS]
     if unknown:
         parser.error(f'unknown experiment or controller: {", ".join(unknown)} '
                      f'(experiments: {", ".join(EXPERIMENTS)}; controllers: {", ".join(factory.CONTROLLERS)})')

@@ -1,30 +1,21 @@
-"""Delay margin of a controller: the smallest transport delay that gives a limit cycle or divergence.
+"""The one-flight harness of the adaptive-control study (bench/adaptive_study.py, docs/ADAPTIVE.md).
 
-Also the one-flight harness the adaptive-control study uses (``fly_case``, ``oscillation``): a
-paper flight (or any scenario) with a transport delay [s], sensor noise and a control rate.
+``fly_case`` flies a paper flight (or any scenario) with a transport delay [s], sensor noise, a
+control rate and a motor lag; ``oscillation`` and ``unstable`` judge it. (The delay margins of
+docs/PAPER.md come from bench/paper_tables.py --experiments delay.)
 
-A flight *fails the delay test* when it fails outright (non-finite, flipped, crashed, or a position
+A flight is *unstable* when it fails outright (non-finite, flipped, crashed, or a position
 error above ``max_error`` after settling), when its position RMSE exceeds both 1 cm and 10 times
-its RMSE without delay (a degraded, oscillating flight that has not crashed yet: the sign-SMC at
-65 ms tracks with 54 cm RMSE), or when it shows a sustained oscillation: the rms of U2 or
-U3 about its own 0.5 s moving mean, over the last ``window`` seconds, above both ``threshold`` [N]
-and 3 times its value without delay (a sign-SMC chatters at rms ~0.5 N without any delay: that is
-its nominal behaviour, not a limit cycle caused by the delay). A smooth controller's stable flight
-follows the slow helix and disturbance moments (detrended rms ~1e-6 N); the limit cycles of issue 9
-swing U2 by +-1 N (rms ~0.7 N). The default threshold, 0.05 N, is 2 % of the rotor limit
-F_max = 2.68 N.
-
-The delay is a whole number of control steps, so the bisection runs on steps: it assumes that a
-delay that fails is followed by failing delays only (checked at the upper end). Usage:
-
-    .venv/bin/python bench/delay_margin.py nnit2fsmc smc-sign smc-sat pid --duration 30
-    .venv/bin/python bench/delay_margin.py nnit2fsmc --gains my_gains.yaml --max-delay 0.1
-    .venv/bin/python bench/delay_margin.py nnit2fsmc --faithful        # the paper-faithful settings
+its RMSE without delay (a degraded, oscillating flight that has not crashed yet), or when it shows
+a sustained oscillation: the rms of U2 or U3 about its own 0.5 s moving mean, over the last
+``window`` seconds, above both ``threshold`` [N] and 3 times its value without delay (a sign-SMC
+chatters at rms ~0.5 N without any delay: that is its nominal behaviour, not a limit cycle). A
+smooth controller's stable flight follows the slow helix and disturbance moments (detrended rms
+~1e-6 N); the limit cycles of issue 9 swing U2 by +-1 N (rms ~0.7 N). The default threshold,
+0.05 N, is 2 % of the rotor limit F_max = 2.68 N.
 """
 from __future__ import annotations
 
-import argparse
-import math
 import sys
 from pathlib import Path
 from typing import NamedTuple
@@ -38,7 +29,7 @@ sys.path.insert(0, str(ROOT))
 
 from flight_stack.closed_loop import FailureRules  # noqa: E402
 from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
-from nnit2fsmc_controller.factory import PAPER_FAITHFUL, flatten_gains, load_gains, unflatten_gains  # noqa: E402
+from nnit2fsmc_controller.factory import load_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
 from quad_msgs_bridge.review.metrics import flight_metrics  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
@@ -109,67 +100,3 @@ def unstable(case: Case, threshold: float = 0.05, reference: Case | None = None)
         0.01, 10.0 * reference.metrics['rmse_position_m'])
     return (case.failure is not None or max(case.oscillation) > level or not case.metrics['all_finite']
             or degraded)
-
-
-def delay_margin(kind: str, gains: dict | None = None, *, max_delay: float = 0.1, duration: float = 30.0,
-                 threshold: float = 0.05, verbose: bool = True) -> float | None:
-    """Smallest transport delay [s] (whole control steps) at which ``kind`` limit-cycles or diverges on the
-    paper flight, by bisection on [0, max_delay]; None if even ``max_delay`` is stable."""
-    gains = load_gains() if gains is None else gains
-    dt = 1.0 / float(gains['common']['control_rate'])
-
-    def fly(steps: int) -> Case:
-        return fly_case(kind, gains, delay_s=steps * dt, duration=duration)
-
-    reference = fly(0)
-
-    def fails(steps: int) -> bool:
-        case = fly(steps)
-        bad = unstable(case, threshold, reference)
-        if verbose:
-            print(f'  {kind}: delay {steps * dt * 1e3:6.1f} ms  osc U2/U3 {case.oscillation[0]:.3g}/'
-                  f'{case.oscillation[1]:.3g} N  RMSE {case.metrics["rmse_position_m"] * 100:.3g} cm  '
-                  f'failure {case.failure}  -> {"UNSTABLE" if bad else "stable"}', file=sys.stderr, flush=True)
-        return bad
-
-    high = int(round(max_delay / dt))
-    if unstable(reference, threshold, reference):
-        return 0.0
-    if not fails(high):
-        return None
-    low = 0   # stable; high unstable
-    while high - low > 1:
-        middle = (low + high) // 2
-        if fails(middle):
-            high = middle
-        else:
-            low = middle
-    return high * dt
-
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('controllers', nargs='+')
-    parser.add_argument('--gains', help='gains file (default: the packaged one)')
-    parser.add_argument('--faithful', action='store_true',
-                        help='fly the paper-faithful settings (factory.PAPER_FAITHFUL, docs/ADAPTIVE.md)')
-    parser.add_argument('--max-delay', type=float, default=0.1, help='[s] upper end of the search')
-    parser.add_argument('--duration', type=float, default=30.0, help='[s] paper flight length per trial')
-    parser.add_argument('--threshold', type=float, default=0.05, help='[N] detrended rms of U2/U3 called a limit cycle')
-    args = parser.parse_args(argv)
-    gains = load_gains(args.gains)
-    if args.faithful:
-        flat = flatten_gains(gains)
-        flat.update(PAPER_FAITHFUL)
-        gains = unflatten_gains(flat)
-    print('| controller | delay margin [ms] |\n|---|---:|')
-    for kind in args.controllers:
-        margin = delay_margin(kind, gains, max_delay=args.max_delay, duration=args.duration,
-                              threshold=args.threshold)
-        shown = f'> {args.max_delay * 1e3:g}' if margin is None else f'{margin * 1e3:g}'
-        print(f'| {kind} | {shown} |', flush=True)
-    return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
