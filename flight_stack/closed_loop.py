@@ -8,8 +8,13 @@ Per control step, in this order (the order of the ROS lockstep flight):
 2. the controller answers it with the reference for the same instant t;
 3. the forces go through the transport delay (if any) to the simulator, which integrates until
    the next control step (motor lag and wind act at every physics step, inside the simulator);
-4. the new true state is checked: a vehicle that went non-finite, flipped over, crashed or left the
-   tracking tube (:class:`FailureRules`) is failed and frozen where it was.
+4. the new true state is checked: a vehicle that went non-finite, flipped over, crashed, left the
+   tracking tube (:class:`FailureRules`) or the arena is failed and frozen where it was.
+
+A measurement that is not finite although the true state is (a diverging vehicle whose huge
+velocity overflows in the odometry conversion) fails that vehicle as non-finite before the
+controller reads it; the controller then reads zeros in its place, so one vehicle never stops a
+batch.
 
 The same code steps one vehicle (every value a float) and a batch (arrays of shape (B,)): a
 failed vehicle of a batch is frozen and never poisons the others; a single vehicle's flight ends.
@@ -31,7 +36,12 @@ from quad_sim.perturbations.sensor_noise import SensorNoise
 from quad_sim.simulator import Simulator
 
 #: failure codes, in the order they are checked (the first that applies is reported)
-FAILURES = ('non-finite state', 'flipped over', 'crashed', 'position error above max_error')
+FAILURES = ('non-finite state', 'flipped over', 'crashed', 'position error above max_error', 'left the arena')
+
+
+#: [m] a vehicle farther than this from its reference has left the arena, at any time (also while
+#: settling, when max_error does not apply yet): it is diverging
+ARENA_RADIUS = 100.0
 
 
 #: [m] height above which a vehicle counts as airborne: once it was, touching the ground is a crash
@@ -109,7 +119,13 @@ class ClosedLoop:
         t = sim.time
         truth = sim.state
         measured = truth if self.sensor_noise is None else self.sensor_noise.measure(truth)
-        seen, observation = (measured, None) if self.observe is None else self.observe(t, measured)
+        with np.errstate(over='ignore', invalid='ignore'):
+            seen, observation = (measured, None) if self.observe is None else self.observe(t, measured)
+        xp = namespace_for(seen[0])
+        unreadable = xp.where(xp.finite_each(seen), False, True)
+        if xp.any(unreadable):
+            self._fail(unreadable, 0, t)
+            seen = [xp.where(unreadable, 0.0, value) for value in seen]
         reference = self.reference(t)
         out = self.controller.update(t, seen, reference)
         applied = out.forces if self.delay is None else self.delay(out.forces)
@@ -120,6 +136,14 @@ class ClosedLoop:
         sim.advance(self.substeps)
         self._check(sim.time, truth, reference)
         return LoopStep(t, truth, seen, observation, reference, out, applied)
+
+    def _fail(self, which, code, t: float) -> None:
+        """Fail the vehicles ``which`` (a bool or bool array) that still fly, with failure ``code`` at t [s]."""
+        xp = namespace_for(self.failure)
+        new = (self.failure < 0) & which
+        if xp.any(new):
+            self.failure = xp.where(new, code, self.failure)
+            self.failure_time = xp.where(new, t, self.failure_time)
 
     def _check(self, t: float, previous: list, reference: ReferenceSample) -> None:
         """Fail the vehicles that broke a rule at sim time t [s]; a failed vehicle stays where it was."""
@@ -132,14 +156,12 @@ class ClosedLoop:
         height = xp.where(finite, state[Z], 0.0)
         code = xp.where((code < 0) & self.airborne & (height <= 0.0), 2, code)
         self.airborne = self.airborne | (height > AIRBORNE_HEIGHT)
+        with np.errstate(invalid='ignore', over='ignore'):
+            error = xp.sqrt(sum((p - r) * (p - r) for p, r in zip(state[:3], reference.position)))
         if t >= self.rules.settle_time:
-            with np.errstate(invalid='ignore', over='ignore'):
-                error = xp.sqrt(sum((p - r) * (p - r) for p, r in zip(state[:3], reference.position)))
             code = xp.where((code < 0) & (error > self.rules.max_error), 3, code)
-        new = (self.failure < 0) & (code >= 0)
-        if xp.any(new):
-            self.failure = xp.where(new, code, self.failure)
-            self.failure_time = xp.where(new, t, self.failure_time)
+        code = xp.where((code < 0) & (error > ARENA_RADIUS), 4, code)
+        self._fail(code >= 0, code, t)
         frozen = self.failure >= 0
         if xp.any(frozen):
             self.simulator.state = [xp.where(frozen, old, value) for old, value in zip(previous, state)]

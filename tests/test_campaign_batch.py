@@ -9,7 +9,7 @@ import pytest
 from flight_stack.campaign.batch import BIAS_COLUMNS, BatchJob, CampaignSetup, fly_batch
 from flight_stack.campaign.sampling import SAMPLED_COLUMNS, build_perturbations, sample_conditions
 from flight_stack.campaign.spec import parse_spec
-from flight_stack.closed_loop import ClosedLoop, FailureRules
+from flight_stack.closed_loop import FAILURES, ClosedLoop, FailureRules
 from flight_stack.embedded import fly_embedded
 from nnit2fsmc_controller.factory import CONTROLLERS, build_controller
 from quad_msgs_bridge.review.metrics import flight_metrics
@@ -110,6 +110,30 @@ def test_a_failing_vehicle_is_frozen_and_never_poisons_the_batch():
     healthy = _loop(VehicleParams.stack([nominal, nominal]), [v[[0, 3]] for v in start], 60, rules)
     for mixed, alone in zip(loop.simulator.state, healthy.simulator.state):
         np.testing.assert_array_equal(mixed[[0, 3]], alone)
+
+
+def test_an_unreadable_measurement_or_a_vehicle_leaving_the_arena_fails_only_that_vehicle():
+    """A finite true state whose measurement is not finite (a diverging vehicle's odometry overflows)
+    fails that vehicle as non-finite before the controller reads it; a vehicle 150 m from its
+    reference has left the arena even while settling. The controller never refuses the batch."""
+    setup = CampaignSetup.of(SPEC)
+    start = [np.array([1.0, 1.0, 1.0]) * v for v in setup.trajectory.initial_state]
+    start[2] = np.full(3, 0.5)
+    start[0] = np.array([1.0, 1.0, 151.0])          # vehicle 2: far away
+    controller = build_controller('nnit2fsmc', setup.nominal, setup.gains, batch=3)
+    simulator = Simulator(QuadrotorModel(VehicleParams.stack([setup.nominal] * 3), setup.disturbances),
+                          setup.physics_dt, start)
+    hold = setup.trajectory.sample(0.0)._replace(position=(1.0, 0.0, 0.5))
+
+    def observe(t, state):       # vehicle 1's sensor overflows
+        return [np.where([False, True, False], np.inf, v) for v in state], None
+    loop = ClosedLoop(controller, simulator, lambda t: hold, setup.substeps, FailureRules(5.0, 1.0), observe=observe)
+    for _ in range(20):
+        loop.step()
+    assert list(loop.failure) == [-1, 0, 4]
+    assert FAILURES[0] == 'non-finite state' and FAILURES[4] == 'left the arena'
+    assert loop.failure_time[1] == 0.0 and loop.failure_time[2] == pytest.approx(setup.control_dt)
+    assert all(np.isfinite(v).all() for v in loop.simulator.state)
 
 
 def test_failed_flights_are_reported_with_a_reason_and_nan_metrics():
