@@ -103,7 +103,7 @@ def per_step_costs(number: int = 20000) -> tuple[float, float]:
     params, _ = load_vehicle_file(None)
     sample = OdometrySample(12.345, (1.0, -2.0, 3.0), (0.1, 0.2, 0.3, 0.927), (0.4, 0.5, 0.6), (0.7, 0.8, 0.9))
     step = (sample, (1.1, 1.2, 1.3, 1.4), (5.0, 0.1, -0.2, 0.01), (1.0, 2.0, 3.0), 0.1, [0.1] * 6, [0.2] * 6,
-            [0.3] * 6)
+            [0.3] * 6, [3.0] * 6)
     with LiveServer('127.0.0.1', 0) as server:
         view = LiveView(server, params)
         alone = timeit.timeit(lambda: view.record_step(*step), number=number)
