@@ -2,9 +2,11 @@
 row depends only on its index, and a failing vehicle is frozen without touching the others."""
 import dataclasses
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from flight_stack.campaign.batch import BIAS_COLUMNS, BatchJob, CampaignSetup, fly_batch
 from flight_stack.campaign.sampling import SAMPLED_COLUMNS, build_perturbations, sample_conditions
@@ -18,16 +20,8 @@ from quad_sim.model import QuadrotorModel
 from quad_sim.simulator import Simulator
 
 #: every perturbation on, mild enough that every controller kind finishes; 250 Hz keeps the test short
-PERTURBED = {
-    'scenario': 'paper', 'duration': 2.0, 'settle_time': 1.2, 'controllers': list(CONTROLLERS), 'flights': 3,
-    'seed': 11, 'control_rate_hz': 250, 'physics_rate_hz': 500,
-    'vehicle': {'mass': 0.05, 'inertia': 0.05, 'drag': 0.25, 'thrust_coefficient': 0.02, 'drag_coefficient': 0.1,
-                'cog_offset_m': 0.0005, 'rotor_efficiency_loss': 0.02},
-    'wind': {'mean_speed_mps': 0.5, 'turbulence': 'light'},
-    'sensor_noise': {'position_m': 0.0005, 'velocity_mps': 0.001, 'attitude_rad': 0.0005,
-                     'body_rate_radps': {'std': 0.001, 'bias_std': 0.0005}},
-    'delay_s': 0.004, 'motor_time_constant_s': 0.01,
-}
+PERTURBED = {**yaml.safe_load((Path(__file__).resolve().parent.parent / 'campaigns' / 'mild-every-perturbation.yaml')
+                              .read_text()), 'controllers': list(CONTROLLERS)}
 SPEC = parse_spec(PERTURBED)
 COMPARED = ('rmse_position_m', 'max_position_error_m', 'rmse_yaw_rad', 'saturation_fraction')
 
