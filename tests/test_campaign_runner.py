@@ -98,8 +98,11 @@ def test_an_existing_campaign_is_only_continued_with_resume(reference_run, tmp_p
 
 
 def run_cli(*args, **kwargs):
+    """``run_stack.py campaign ARGS`` as from a terminal: Ctrl-C (SIGINT) at its default, also when this
+    test runs in a background job of a shell (which starts it with SIGINT ignored)."""
     return subprocess.Popen([sys.executable, str(ROOT / 'run_stack.py'), 'campaign', *map(str, args)],
-                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kwargs)
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kwargs)
 
 
 def test_ctrl_c_keeps_every_finished_batch_and_resume_flies_the_rest(reference_run, tmp_path):
