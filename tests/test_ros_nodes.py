@@ -312,7 +312,9 @@ def test_tf2_sees_every_vehicle_of_a_fleet_at_its_odometry_pose(ros_node):
 
     kit = rclpy_kit()
     buffer = Buffer()
-    listener = TransformListener(buffer, ros_node)   # noqa: F841 (it feeds the buffer while the node spins)
+    # it feeds the buffer while the node spins; deep enough that a loaded machine drops no /tf message (a
+    # dropped one makes the lookup at its stamp interpolate between its neighbours)
+    listener = TransformListener(buffer, ros_node, qos=QoSProfile(depth=10000))   # noqa: F841
     odometry = {'uav1': [], 'uav2': []}
     for name, received in odometry.items():
         ros_node.create_subscription(kit[ODOM.type], f'/tfcheck/{name}/odom', received.append, qos_profile(ODOM.qos))
