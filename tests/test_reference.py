@@ -10,10 +10,10 @@ from quad_msgs_bridge.reference import ReferenceSample, SetpointPath, hold
 
 
 def quintic(rng):
-    """A random degree-5 polynomial per axis, with its first two derivatives."""
+    """A random degree-5 polynomial per axis, with its first four derivatives."""
     coefficients = rng.normal(0.0, 1.0, (3, 6))
     polys = [np.polynomial.Polynomial(c) for c in coefficients]
-    return [(p, p.deriv(), p.deriv(2)) for p in polys]
+    return [(p, p.deriv(), p.deriv(2), p.deriv(3), p.deriv(4)) for p in polys]
 
 
 def sample_polys(polys, t):
@@ -27,7 +27,7 @@ def test_path_reproduces_a_quintic_exactly(seed):
     times = np.sort(rng.uniform(0.0, 2.0, 6))
     points = []
     for t in times:
-        position, velocity, acceleration = sample_polys(polys, t)
+        position, velocity, acceleration, _, _ = sample_polys(polys, t)
         points.append(ReferenceSample(position, velocity, acceleration, 0.0))
     path = SetpointPath(times, points)
     for t in np.linspace(times[0], times[-1], 97):
@@ -37,6 +37,9 @@ def test_path_reproduces_a_quintic_exactly(seed):
         np.testing.assert_allclose(sample.position, expected[0], atol=1e-9)
         np.testing.assert_allclose(sample.velocity, expected[1], atol=1e-8)
         np.testing.assert_allclose(sample.acceleration, expected[2], atol=1e-6)
+        if t < times[-1]:   # the last point is returned as published: a message carries no jerk or snap
+            np.testing.assert_allclose(sample.jerk, expected[3], atol=1e-4)
+            np.testing.assert_allclose(sample.snap, expected[4], atol=1e-2)
 
 
 def test_path_passes_through_its_points():

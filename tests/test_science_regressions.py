@@ -179,9 +179,10 @@ def test_flatness_rates_are_the_time_derivatives_of_the_eq10_attitude(trajectory
 
     for t in np.linspace(1.0, 30.0, 31):
         r = trajectory.sample(float(t))
-        dphi, ddphi, dtheta, ddtheta = controller.flat_attitude_rates(
+        phi, dphi, ddphi, theta, dtheta, ddtheta = controller.flat_attitude(
             r.acceleration[0], r.acceleration[1], r.jerk[:2], r.snap[:2], r.yaw, r.yaw_rate, r.yaw_acceleration)
         before, now, after = attitude(t - h), attitude(t), attitude(t + h)
+        assert (phi, theta) == tuple(now)   # eq. (10) itself, with the same arithmetic
         if np.abs(after - before).max() > 1.0:   # yaw wrap of the helix between the samples
             continue
         np.testing.assert_allclose([dphi, dtheta], (after - before) / (2 * h), rtol=0, atol=1e-7)
@@ -189,10 +190,10 @@ def test_flatness_rates_are_the_time_derivatives_of_the_eq10_attitude(trajectory
     # one code path: a batch of the same inputs gives the same numbers
     r = trajectory.sample(7.3)
     ones = np.ones(3)
-    batch = controller.flat_attitude_rates(r.acceleration[0] * ones, r.acceleration[1] * ones, r.jerk[:2],
-                                           r.snap[:2], r.yaw * ones, r.yaw_rate, r.yaw_acceleration)
-    single = controller.flat_attitude_rates(r.acceleration[0], r.acceleration[1], r.jerk[:2], r.snap[:2], r.yaw,
-                                            r.yaw_rate, r.yaw_acceleration)
+    batch = controller.flat_attitude(r.acceleration[0] * ones, r.acceleration[1] * ones, r.jerk[:2],
+                                     r.snap[:2], r.yaw * ones, r.yaw_rate, r.yaw_acceleration)
+    single = controller.flat_attitude(r.acceleration[0], r.acceleration[1], r.jerk[:2], r.snap[:2], r.yaw,
+                                      r.yaw_rate, r.yaw_acceleration)
     np.testing.assert_allclose(np.array(batch), np.array(single)[:, None] * ones, rtol=1e-14)
 
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
-from quad_msgs_bridge.vehicle_params import (DEFAULT_VEHICLE_FILE, Disturbance, ParameterError, VehicleParams,
-                                             check_number, load_vehicle_file)
+from quad_msgs_bridge.vehicle_params import (DEFAULT_VEHICLE_FILE, Disturbance, Disturbances, ParameterError,
+                                             VehicleParams, check_number, load_vehicle_file)
 
 
 def default_document() -> dict:
@@ -39,8 +39,11 @@ def test_section_iv_disturbances():
 
 
 def test_disturbance_channel():
-    channel = Disturbance(bias=0.5, amplitude=2.0, omega=3.0)
-    assert channel.at(0.7) == pytest.approx(0.5 + 2.0 * math.sin(2.1), rel=1e-15)
+    """Each channel is bias + amplitude sin(omega t), in the order A_x .. A_psi."""
+    channels = [Disturbance(bias=0.1 * k, amplitude=2.0 + k, omega=3.0 - 0.5 * k) for k in range(6)]
+    values = Disturbances(True, *channels).at(0.7)
+    assert values == pytest.approx([0.1 * k + (2.0 + k) * math.sin((3.0 - 0.5 * k) * 0.7) for k in range(6)],
+                                   rel=1e-15)
 
 
 def test_file_round_trip(tmp_path):

@@ -29,7 +29,7 @@ come from one of two sources (``attitude_rates``):
   the attitude of the reference acceleration, phi_r = eq. (10) at (x_d'', y_d''), and the feedback
   residual phi_d - phi_r. The rate and acceleration of phi_r are the exact time derivatives of
   eq. (10) along the reference (reference jerk and snap, reference yaw rate and acceleration;
-  :meth:`CascadedController.flat_attitude_rates`); the residual, small and slow except while the
+  :meth:`CascadedController.flat_attitude`); the residual, small and slow except while the
   position loop corrects an error, is differentiated once by the filter. The surface uses
   dphi_r + filtered d(residual)/dt; the law's reference inputs (the network's inputs, the
   model-based equivalent control) are dphi_r and ddphi_r only: the network then sees the
@@ -165,8 +165,7 @@ class CascadedController:
         phi_d, theta_d = self.attitude_from_accelerations(out_x.value, out_y.value, psi)
         f = self._filters
         if self.attitude_rates == 'flatness':
-            phi_r, theta_r = self.attitude_from_accelerations(axd, ayd, psi)
-            dphi_r, ddphi_r, dtheta_r, ddtheta_r = self.flat_attitude_rates(
+            phi_r, dphi_r, ddphi_r, theta_r, dtheta_r, ddtheta_r = self.flat_attitude(
                 axd, ayd, reference.jerk[:2], reference.snap[:2], psi, reference.yaw_rate, reference.yaw_acceleration)
             dphi_d = dphi_r + f['dphi'].update(phi_d - phi_r)
             dtheta_d = dtheta_r + f['dtheta'].update(theta_d - theta_r)
@@ -215,10 +214,11 @@ class CascadedController:
         limit = self._max_horizontal
         return limit / xp.maximum(xp.hypot(ax, ay), limit)
 
-    def flat_attitude_rates(self, ax, ay, jerk, snap, psi, dpsi, ddpsi):
-        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2]: the time derivatives of eq. (10) at
-        (ax, ay) [m/s^2] and yaw psi [rad] when the acceleration changes with ``jerk`` (jx, jy) [m/s^3]
-        and ``snap`` (sx, sy) [m/s^4] and the yaw with dpsi [rad/s], ddpsi [rad/s^2] (differential
+    def flat_attitude(self, ax, ay, jerk, snap, psi, dpsi, ddpsi):
+        """(phi_d, dphi_d, ddphi_d, theta_d, dtheta_d, ddtheta_d) [rad, rad/s, rad/s^2]: eq. (10) at
+        (ax, ay) [m/s^2] and yaw psi [rad] (:meth:`attitude_from_accelerations`, the same arithmetic)
+        and its time derivatives when the acceleration changes with ``jerk`` (jx, jy) [m/s^3] and
+        ``snap`` (sx, sy) [m/s^4] and the yaw with dpsi [rad/s], ddpsi [rad/s^2] (differential
         flatness). Beyond the tilt limit the three are scaled like the acceleration.
 
         With A = ax cos psi + ay sin psi, B = ax sin psi - ay cos psi, theta_d = atan(A / g) and
@@ -251,7 +251,7 @@ class CascadedController:
         dc = (db * ct - b_ * st * dtheta) / g
         ddc = (ddb * ct - 2.0 * db * st * dtheta - b_ * ct * dtheta * dtheta - b_ * st * ddtheta) / g
         r = 1.0 + cc * cc
-        return dc / r, ddc / r - 2.0 * cc * dc * dc / (r * r), dtheta, ddtheta
+        return xp.atan(cc), dc / r, ddc / r - 2.0 * cc * dc * dc / (r * r), theta, dtheta, ddtheta
 
     def attitude_from_accelerations(self, ax, ay, psi):
         """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi.

@@ -26,7 +26,7 @@ forms scale the leakage by the adaptation gain too; here it is a rate of its own
 per-subsystem rates alpha span four decades and alpha sigma > 1 would make the leakage unstable.)
 
 Each equation is written once, in :class:`EquivalentControlNetwork`, on top of a small layer
-algebra with two implementations of the same four operations: :class:`ListLayers` for one vehicle
+algebra with two implementations of the same six operations: :class:`ListLayers` for one vehicle
 (lists of plain floats: one network per subsystem has a few dozen weights, and pure Python is far
 faster than numpy at this size) and :class:`ArrayLayers` for a batch of B vehicles (hidden weights
 an array (H, I, B), output weights (H, B): one network per vehicle, each learning from its own
@@ -53,16 +53,21 @@ def bipolar_sigmoid(x: float) -> float:
 
 
 class ListLayers:
-    """Layer operations of one vehicle's network: vectors are lists of floats, matrices lists of rows."""
+    """Layer operations of one vehicle's network: vectors are lists of floats, matrices lists of rows.
+
+    Written as comprehensions over plain floats: at a few dozen weights the interpreter's cost per
+    call, not the arithmetic, is what a control step pays for, so each operation is one pass.
+    """
 
     @staticmethod
     def weights(values: list, batch: int | None) -> list:
         return [list(map(float, row)) if isinstance(row, list) else float(row) for row in values]
 
     @staticmethod
-    def weighted_sums(matrix: list, inputs: Sequence) -> list:
-        """sum_i W[j][i] x_i for every row j."""
-        return [sum(map(mul, row, inputs)) for row in matrix]
+    def activations(matrix: list, inputs: Sequence) -> list:
+        """g(sum_i W[j][i] x_i) for every row j, g the bipolar sigmoid of eq. (4) (= tanh(x / 2))."""
+        tanh = math.tanh
+        return [tanh(0.5 * sum(map(mul, row, inputs))) for row in matrix]
 
     @staticmethod
     def dot(vector: list, other: list):
@@ -74,20 +79,18 @@ class ListLayers:
         return list(map(function, *vectors))
 
     @staticmethod
-    def outer_step(matrix: list, steps: list, inputs: Sequence, limit: float) -> list:
-        """W[j][i] - step_j x_i, each weight clipped to [-limit, limit]."""
-        return [SCALAR.project([w - step * x for w, x in zip(row, inputs)], limit) for row, step in zip(matrix, steps)]
+    def leaky_outer_step(matrix: list, anchor: list, leak, steps: list, inputs: Sequence, limit: float) -> list:
+        """W[j][i] - leak (W[j][i] - W0[j][i]) - step_j x_i, every weight clipped to [-limit, limit]."""
+        rows = [[w - leak * (w - w0) - step * x for w, w0, x in zip(row, anchor_row, inputs)]
+                for row, anchor_row, step in zip(matrix, anchor, steps)]
+        if -limit <= min(map(min, rows)) and max(map(max, rows)) <= limit:   # the common case: no copy
+            return rows
+        return [SCALAR.project(row, limit) for row in rows]
 
     @staticmethod
-    def step(vector: list, steps: list, limit: float) -> list:
-        """w_j - step_j, clipped to [-limit, limit]."""
-        return SCALAR.project([w - step for w, step in zip(vector, steps)], limit)
-
-    @staticmethod
-    def relax(weights: list, anchor: list, factor) -> list:
-        """W - factor (W - W0), elementwise, for a vector or a matrix (list of rows)."""
-        return [ListLayers.relax(w, a, factor) if isinstance(w, list) else w - factor * (w - a)
-                for w, a in zip(weights, anchor)]
+    def leaky_step(vector: list, anchor: list, leak, steps: list, limit: float) -> list:
+        """w_j - leak (w_j - w0_j) - step_j, clipped to [-limit, limit]."""
+        return SCALAR.project([w - leak * (w - w0) - step for w, w0, step in zip(vector, anchor, steps)], limit)
 
 
 class ArrayLayers:
@@ -98,8 +101,8 @@ class ArrayLayers:
         return np.repeat(np.asarray(values, dtype=float)[..., None], batch, axis=-1)
 
     @staticmethod
-    def weighted_sums(matrix: np.ndarray, inputs: Sequence) -> np.ndarray:
-        return sum(matrix[:, i] * x for i, x in enumerate(inputs))
+    def activations(matrix: np.ndarray, inputs: Sequence) -> np.ndarray:
+        return np.tanh(0.5 * sum(matrix[:, i] * x for i, x in enumerate(inputs)))
 
     @staticmethod
     def dot(vector: np.ndarray, other: np.ndarray):
@@ -110,19 +113,16 @@ class ArrayLayers:
         return function(*vectors)
 
     @staticmethod
-    def outer_step(matrix: np.ndarray, steps: np.ndarray, inputs: Sequence, limit: float) -> np.ndarray:
-        updated = np.empty_like(matrix)
+    def leaky_outer_step(matrix: np.ndarray, anchor: np.ndarray, leak, steps: np.ndarray, inputs: Sequence,
+                         limit: float) -> np.ndarray:
+        updated = matrix - leak * (matrix - anchor)
         for i, x in enumerate(inputs):
-            np.subtract(matrix[:, i], steps * x, out=updated[:, i])
+            np.subtract(updated[:, i], steps * x, out=updated[:, i])
         return np.clip(updated, -limit, limit, out=updated)
 
     @staticmethod
-    def step(vector: np.ndarray, steps: np.ndarray, limit: float) -> np.ndarray:
-        return np.clip(vector - steps, -limit, limit)
-
-    @staticmethod
-    def relax(weights: np.ndarray, anchor: np.ndarray, factor) -> np.ndarray:
-        return weights - factor * (weights - anchor)
+    def leaky_step(vector: np.ndarray, anchor: np.ndarray, leak, steps: np.ndarray, limit: float) -> np.ndarray:
+        return np.clip(vector - leak * (vector - anchor) - steps, -limit, limit)
 
 
 class EquivalentControlNetwork:
@@ -165,14 +165,14 @@ class EquivalentControlNetwork:
 
         Each input is a float (shared by every vehicle of a batch) or an array of one per vehicle.
         """
-        layers, tanh = self.layers, self.xp.tanh
-        hidden = layers.elementwise(lambda total: tanh(0.5 * total), layers.weighted_sums(self.hidden_weights, inputs))
-        output = tanh(0.5 * layers.dot(self.output_weights, hidden))
+        hidden = self.layers.activations(self.hidden_weights, inputs)
+        output = self.xp.tanh(0.5 * self.layers.dot(self.output_weights, hidden))
         self._inputs, self._hidden, self._output = inputs, hidden, output
         return self.output_gain * output
 
     def _error_factors(self, u_fuzzy):
-        """Per hidden unit j: (dE/dWy[j], dE/dWz[j][i] / Z_i) of eqs. (8) and (9) at the last forward pass."""
+        """Per hidden unit j: (dE/dWy[j], dE/dWz[j][i] / Z_i) of eqs. (8) and (9) at the last forward pass,
+        times any factor ``u_fuzzy`` carries (learn() passes alpha U_fuzzy: the steps of eqs. 6-7)."""
         common = u_fuzzy * self.output_gain * (1.0 - self._output * self._output)
         output_factors = self.layers.elementwise(lambda y: -0.5 * common * y, self._hidden)
         hidden_factors = self.layers.elementwise(lambda wy, y: -0.25 * common * wy * (1.0 - y * y),
@@ -195,13 +195,9 @@ class EquivalentControlNetwork:
         if self.learning_rate == 0.0 or (not is_batch(u_fuzzy) and u_fuzzy == 0.0
                                          and (sigma == 0.0 or self.modification == 'e')):
             return
-        layers, alpha, limit = self.layers, self.learning_rate, self.weight_limit
-        output_factors, hidden_factors = self._error_factors(u_fuzzy)
-        hidden, output = self.hidden_weights, self.output_weights
-        if sigma > 0.0:
-            factor = sigma * (abs(u_fuzzy) / self.output_gain if self.modification == 'e' else 1.0)
-            hidden = layers.relax(hidden, self._hidden_anchor, factor)
-            output = layers.relax(output, self._output_anchor, factor)
-        self.hidden_weights = layers.outer_step(hidden, layers.elementwise(lambda f: alpha * f, hidden_factors),
-                                                self._inputs, limit)
-        self.output_weights = layers.step(output, layers.elementwise(lambda f: alpha * f, output_factors), limit)
+        output_steps, hidden_steps = self._error_factors(self.learning_rate * u_fuzzy)
+        leak = sigma * (abs(u_fuzzy) / self.output_gain if self.modification == 'e' else 1.0) if sigma > 0.0 else 0.0
+        layers, limit = self.layers, self.weight_limit
+        self.hidden_weights = layers.leaky_outer_step(self.hidden_weights, self._hidden_anchor, leak, hidden_steps,
+                                                      self._inputs, limit)
+        self.output_weights = layers.leaky_step(self.output_weights, self._output_anchor, leak, output_steps, limit)

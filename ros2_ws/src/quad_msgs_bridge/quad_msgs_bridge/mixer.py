@@ -67,8 +67,14 @@ def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
     """
     xp = namespace_for(u1, u2, u3, u4)
     mean = 0.25 * xp.clip(u1, 4.0 * f_min, 4.0 * f_max)
-    below, above = mean - f_min, f_max - mean                 # room of the mean thrust, >= 0
     yaw = 0.25 * u4 / yaw_coefficient
+    # the common case first: the demand fits (s = 1, the demanded yaw shift), computed as below
+    demanded = (mean - 0.5 * u3 - yaw, mean - 0.5 * u2 + yaw, mean + 0.5 * u3 - yaw, mean + 0.5 * u2 + yaw)
+    fits = ((xp.minimum(xp.minimum(demanded[0], demanded[1]), xp.minimum(demanded[2], demanded[3])) >= f_min)
+            & (xp.maximum(xp.maximum(demanded[0], demanded[1]), xp.maximum(demanded[2], demanded[3])) <= f_max))
+    if xp.all(fits):
+        return demanded
+    below, above = mean - f_min, f_max - mean                 # room of the mean thrust, >= 0
     low, high = xp.minimum(yaw, 0.0), xp.maximum(yaw, 0.0)   # the yaw shifts allowed: between 0 and the demand
     pitch, roll = 0.5 * xp.abs(u3), 0.5 * xp.abs(u2)
 
@@ -86,7 +92,8 @@ def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
     shift = xp.clip(yaw, xp.maximum(scale * pitch - above, scale * roll - below),
                     xp.minimum(below - scale * pitch, above - scale * roll))
     forces = (mean - half_pitch - shift, mean - half_roll + shift, mean + half_pitch - shift, mean + half_roll + shift)
-    return saturate_forces(forces, f_min, f_max)   # removes rounding only (1e-16 N)
+    forces = saturate_forces(forces, f_min, f_max)   # removes rounding only (1e-16 N)
+    return tuple(xp.where(fits, d, f) for d, f in zip(demanded, forces))   # a batch: per vehicle as above
 
 
 def allocate(allocation, u1, u2, u3, u4, yaw_coefficient, f_min, f_max):

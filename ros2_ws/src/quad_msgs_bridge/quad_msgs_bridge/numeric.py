@@ -11,7 +11,7 @@ element per vehicle. Both namespaces offer the same primitives with the same mea
 * ``take(table, index)``: ``table[index]`` for a whole-number ``index`` (a float or float array);
 * ``all_finite(values)``: whether every value of a sequence (of floats or arrays) is finite;
 * ``finite_each(values)``: per vehicle, whether all its values in the sequence are finite;
-* ``any(condition)``: whether the condition holds for any vehicle (a plain bool);
+* ``any(condition)``, ``all(condition)``: whether the condition holds for any, every vehicle (a plain bool);
 * ``project(values, limit)``: the list ``values`` with each value clipped to [-limit, limit].
 
 A single vehicle runs on plain floats because numpy's per-call overhead (a microsecond) is far
@@ -53,7 +53,7 @@ SCALAR = SimpleNamespace(
     clip=_clip, where=_where, sign=_sign, signed_square=lambda v: v * abs(v),
     take=lambda table, index: table[int(index)],
     all_finite=lambda values: all(map(math.isfinite, values)), project=_project,
-    finite_each=lambda values: all(map(math.isfinite, values)), any=bool,
+    finite_each=lambda values: all(map(math.isfinite, values)), any=bool, all=bool,
     zeros_like=lambda v: 0.0, copy=lambda v: v)
 BATCH = SimpleNamespace(
     sin=np.sin, cos=np.cos, asin=np.arcsin, atan=np.arctan, atan2=np.arctan2, tanh=np.tanh, hypot=np.hypot,
@@ -63,15 +63,18 @@ BATCH = SimpleNamespace(
     take=lambda table, index: np.asarray(table)[np.asarray(index).astype(np.intp)],
     all_finite=_batch_all_finite,
     finite_each=lambda values: np.logical_and.reduce([np.isfinite(v) for v in values]),
-    any=lambda condition: bool(np.any(condition)),
+    any=lambda condition: bool(np.any(condition)), all=lambda condition: bool(np.all(condition)),
     project=lambda values, limit: [np.minimum(np.maximum(v, -limit), limit) for v in values],
     zeros_like=np.zeros_like, copy=np.copy)
 
 
 def namespace_for(value, *more) -> SimpleNamespace:
     """SCALAR when every value is a plain number, BATCH when any is a numpy array (one element per vehicle)."""
-    if isinstance(value, np.ndarray) or (more and any(isinstance(v, np.ndarray) for v in more)):
+    if isinstance(value, np.ndarray):
         return BATCH
+    for other in more:       # a loop, not any(generator): this runs dozens of times per control step
+        if isinstance(other, np.ndarray):
+            return BATCH
     return SCALAR
 
 

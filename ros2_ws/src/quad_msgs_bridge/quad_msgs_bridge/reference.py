@@ -38,34 +38,30 @@ def _wrap(angle: float) -> float:
     return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
-def _quintic(p0, v0, a0, p1, v1, a1, h, s):
-    """Value, rate and acceleration of the quintic Hermite interpolant at s in [0, 1] of a span h [s]."""
-    s2 = s * s
-    s3 = s2 * s
-    s4 = s3 * s
-    s5 = s4 * s
-    value = ((1.0 - 10.0 * s3 + 15.0 * s4 - 6.0 * s5) * p0 + (s - 6.0 * s3 + 8.0 * s4 - 3.0 * s5) * h * v0
-             + 0.5 * (s2 - 3.0 * s3 + 3.0 * s4 - s5) * h * h * a0 + 0.5 * (s3 - 2.0 * s4 + s5) * h * h * a1
-             + (-4.0 * s3 + 7.0 * s4 - 3.0 * s5) * h * v1 + (10.0 * s3 - 15.0 * s4 + 6.0 * s5) * p1)
-    rate = ((-30.0 * s2 + 60.0 * s3 - 30.0 * s4) * p0 / h + (1.0 - 18.0 * s2 + 32.0 * s3 - 15.0 * s4) * v0
-            + 0.5 * (2.0 * s - 9.0 * s2 + 12.0 * s3 - 5.0 * s4) * h * a0 + 0.5 * (3.0 * s2 - 8.0 * s3 + 5.0 * s4) * h * a1
-            + (-12.0 * s2 + 28.0 * s3 - 15.0 * s4) * v1 + (30.0 * s2 - 60.0 * s3 + 30.0 * s4) * p1 / h)
-    accel = ((-60.0 * s + 180.0 * s2 - 120.0 * s3) * p0 / (h * h) + (-36.0 * s + 96.0 * s2 - 60.0 * s3) * v0 / h
-             + 0.5 * (2.0 - 18.0 * s + 36.0 * s2 - 20.0 * s3) * a0 + 0.5 * (6.0 * s - 24.0 * s2 + 20.0 * s3) * a1
-             + (-24.0 * s + 84.0 * s2 - 60.0 * s3) * v1 / h + (60.0 * s - 180.0 * s2 + 120.0 * s3) * p1 / (h * h))
-    return value, rate, accel
+def _quintic_coefficients(p0, v0, a0, p1, v1, a1, h) -> tuple:
+    """The quintic Hermite interpolant over a span h [s] matching value, rate and acceleration
+    (p, v, a) at both ends, as (c0 .. c5, h): value = sum c_n s^n with s = (t - t0) / h in [0, 1].
+
+    c0 .. c2 are p0, h v0 and h^2 a0 / 2; c3 .. c5 follow from the conditions at s = 1 (the classic
+    Hermite basis functions, expanded in powers of s).
+    """
+    dp, hv0, hv1, h2a0, h2a1 = p1 - p0, h * v0, h * v1, h * h * a0, h * h * a1
+    return (p0, hv0, 0.5 * h2a0,
+            10.0 * dp - 6.0 * hv0 - 4.0 * hv1 - 1.5 * h2a0 + 0.5 * h2a1,
+            -15.0 * dp + 8.0 * hv0 + 7.0 * hv1 + 1.5 * h2a0 - h2a1,
+            6.0 * dp - 3.0 * hv0 - 3.0 * hv1 - 0.5 * h2a0 + 0.5 * h2a1, h)
 
 
-def _quintic_jerk_snap(p0, v0, a0, p1, v1, a1, h, s):
-    """Third and fourth time derivatives of the interpolant of :func:`_quintic` at s in [0, 1]."""
-    s2 = s * s
-    jerk = ((-60.0 + 360.0 * s - 360.0 * s2) * (p0 - p1) / h ** 3
-            + (-36.0 + 192.0 * s - 180.0 * s2) * v0 / h ** 2 + (-24.0 + 168.0 * s - 180.0 * s2) * v1 / h ** 2
-            + 0.5 * (-18.0 + 72.0 * s - 60.0 * s2) * a0 / h + 0.5 * (6.0 - 48.0 * s + 60.0 * s2) * a1 / h)
-    snap = ((360.0 - 720.0 * s) * (p0 - p1) / h ** 4 + (192.0 - 360.0 * s) * v0 / h ** 3
-            + (168.0 - 360.0 * s) * v1 / h ** 3 + 0.5 * (72.0 - 120.0 * s) * a0 / h ** 2
-            + 0.5 * (-48.0 + 120.0 * s) * a1 / h ** 2)
-    return jerk, snap
+def _quintic(coefficients: tuple, s: float) -> tuple:
+    """Value and first four time derivatives at s of the interpolant of :func:`_quintic_coefficients`
+    (Horner's scheme; each s-derivative is divided by h per order)."""
+    c0, c1, c2, c3, c4, c5, h = coefficients
+    value = c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
+    rate = (c1 + s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))) / h
+    acceleration = (2.0 * c2 + s * (6.0 * c3 + s * (12.0 * c4 + s * 20.0 * c5))) / (h * h)
+    jerk = (6.0 * c3 + s * (24.0 * c4 + s * 60.0 * c5)) / (h * h * h)
+    snap = (24.0 * c4 + s * 120.0 * c5) / (h * h * h * h)
+    return value, rate, acceleration, jerk, snap
 
 
 class SetpointPath:
@@ -87,6 +83,7 @@ class SetpointPath:
                 raise ValueError(f'non-finite setpoint {point}')
         self.times = [float(t) for t in times]
         self.points = list(points)
+        self._segment, self._coefficients = None, None   #: the last span sampled, and its interpolant
 
     @property
     def start(self) -> float:
@@ -113,19 +110,25 @@ class SetpointPath:
         if t >= times[-1]:
             return points[-1] if t == times[-1] else hold(points[-1].position, points[-1].yaw)
         i = bisect.bisect_right(times, t) - 1
-        a, b = points[i], points[i + 1]
-        h = times[i + 1] - times[i]
-        s = (t - times[i]) / h
-        ends = [(a.position[k], a.velocity[k], a.acceleration[k], b.position[k], b.velocity[k], b.acceleration[k])
-                for k in range(3)]
-        axes = [_quintic(*end, h, s) for end in ends]
-        higher = [_quintic_jerk_snap(*end, h, s) for end in ends]
-        yaw_end = a.yaw + _wrap(b.yaw - a.yaw)
-        yaw, yaw_rate, yaw_acc = _quintic(a.yaw, a.yaw_rate, a.yaw_acceleration,
-                                          yaw_end, b.yaw_rate, b.yaw_acceleration, h, s)
-        return ReferenceSample(
-            position=(axes[0][0], axes[1][0], axes[2][0]),
-            velocity=(axes[0][1], axes[1][1], axes[2][1]),
-            acceleration=(axes[0][2], axes[1][2], axes[2][2]),
-            yaw=_wrap(yaw), yaw_rate=yaw_rate, yaw_acceleration=yaw_acc,
-            jerk=(higher[0][0], higher[1][0], higher[2][0]), snap=(higher[0][1], higher[1][1], higher[2][1]))
+        if i != self._segment:
+            self._segment, self._coefficients = i, self._segment_coefficients(i)
+        s = (t - times[i]) / (times[i + 1] - times[i])
+        cx, cy, cz, cyaw = self._coefficients
+        x, vx, ax, jx, sx = _quintic(cx, s)
+        y, vy, ay, jy, sy = _quintic(cy, s)
+        z, vz, az, jz, sz = _quintic(cz, s)
+        yaw, yaw_rate, yaw_acc, _, _ = _quintic(cyaw, s)
+        return ReferenceSample(position=(x, y, z), velocity=(vx, vy, vz), acceleration=(ax, ay, az),
+                               yaw=_wrap(yaw), yaw_rate=yaw_rate, yaw_acceleration=yaw_acc,
+                               jerk=(jx, jy, jz), snap=(sx, sy, sz))
+
+    def _segment_coefficients(self, i: int) -> tuple:
+        """Per channel x, y, z, yaw: the interpolant's coefficients between points i and i + 1
+        (:func:`_quintic_coefficients`); the yaw takes the short way round."""
+        a, b = self.points[i], self.points[i + 1]
+        h = self.times[i + 1] - self.times[i]
+        axes = tuple(_quintic_coefficients(a.position[k], a.velocity[k], a.acceleration[k],
+                                           b.position[k], b.velocity[k], b.acceleration[k], h) for k in range(3))
+        yaw = _quintic_coefficients(a.yaw, a.yaw_rate, a.yaw_acceleration, a.yaw + _wrap(b.yaw - a.yaw),
+                                    b.yaw_rate, b.yaw_acceleration, h)
+        return (*axes, yaw)
