@@ -115,6 +115,15 @@ def test_sampled_path_is_shifted_to_its_start_and_ends_on_the_duration():
     np.testing.assert_allclose(path.sample(100.5).position, helix.sample(0.5).position, atol=1e-6)
 
 
+def test_a_duration_off_by_round_off_ends_the_path_once():
+    """700 control steps of 1 ms make 0.7000000000000001 s: the 50 Hz path ends there, without a second
+    point 1e-16 s after the sample at 0.7 s (as stamps in nanoseconds they would coincide)."""
+    duration = 700 * 0.001
+    path = SetpointPath.sampled(Helix(), 2.0, duration, 50.0)
+    assert path.end == 2.0 + duration and len(path.times) == 36
+    assert min(b - a for a, b in zip(path.times, path.times[1:])) > 0.019
+
+
 @pytest.mark.parametrize('times, points, fragment', [
     ([0.0, 1.0], [hold((0, 0, 1))], 'as many times as points'),
     ([], [], 'as many times as points'),

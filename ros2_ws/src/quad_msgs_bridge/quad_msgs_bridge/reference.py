@@ -98,8 +98,10 @@ class SetpointPath:
         """``trajectory`` (anything with ``sample(t)``) sampled every 1/rate [s] over [0, duration], shifted to ``start``."""
         count = max(1, int(math.floor(duration * rate + 1e-9))) + 1
         offsets = [k / rate for k in range(count)]
-        if offsets[-1] < duration:
+        if duration - offsets[-1] > 1e-9:   # more than a stamp's resolution (1 ns) short: add the end
             offsets.append(duration)
+        else:                               # on it up to round-off (0.7 vs 700 * 0.001): end exactly there
+            offsets[-1] = duration
         return cls([start + t for t in offsets], [trajectory.sample(t) for t in offsets])
 
     def sample(self, t: float) -> ReferenceSample:
