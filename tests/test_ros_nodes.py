@@ -488,7 +488,9 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
     switch = next(k for k, value in enumerate(lambdas) if value != packaged['z'])
     assert set(lambdas[:switch]) == {packaged['z']} and set(lambdas[switch:]) == {8.0} and packaged['z'] != 8.0
     switched_at = steps[switch][0]
-    assert set_at <= switched_at <= set_at + 0.5e9     # from the next update after the set (lockstep goes on)
+    # from an update after the set, soon after it: set_at is the newest odometry this test node had taken,
+    # and its backlog (3 topics at 1 kHz) lags the lockstepped flight under load (0.68 s seen at load 4)
+    assert set_at <= switched_at <= set_at + 1.0e9
     for stamp, (surfaces, equivalent, _, slopes) in steps:
         state = state_from_odometry(odometry[stamp])
         assert slopes[:2] + slopes[3:] == [packaged[axis] for axis in ('x', 'y', 'phi', 'theta', 'psi')]
