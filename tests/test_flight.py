@@ -71,9 +71,10 @@ def test_nnit2fsmc_tracks_the_paper_helix_under_disturbances(paper_flights):
     record, metrics = paper_flights['nnit2fsmc']
     assert_physical(record)
     assert metrics['duration_s'] == pytest.approx(PAPER - 1e-3)
-    # 1.7 mm / 3.8 mm today. The issue asks for 5 cm / 15 cm; we hold the controller to what it does,
-    # with ~2.5x room: 4 mm RMSE and 1 cm maximum after settling.
-    assert metrics['rmse_position_m'] < 0.004
+    # 4.1 mm RMSE with the defaults (1.7 mm paper-faithful; 3.9 mm before the wider x, y fuzzy universe of
+    # docs/ADAPTIVE.md item 6). The issue asks for 5 cm / 15 cm; we hold the controller to what it does,
+    # with room: 5 mm RMSE and 1 cm maximum after settling.
+    assert metrics['rmse_position_m'] < 0.005
     assert metrics['max_position_error_m'] < 0.010
     assert metrics['rmse_yaw_rad'] < 0.003          # 0.9 mrad today
     # settled flight stays off the rotor limits (saturation only during the take-off)

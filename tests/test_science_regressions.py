@@ -15,6 +15,7 @@ from flight_stack.closed_loop import FailureRules
 from flight_stack.embedded import Perturbations, fly_embedded
 from nnit2fsmc_controller.factory import (ABLATIONS, CONTROLLERS, PAPER_FAITHFUL, build_controller, flatten_gains,
                                           load_gains, unflatten_gains)
+from nnit2fsmc_controller.estimation import VelocityFilter
 from nnit2fsmc_controller.it2_fuzzy import CENTRES, CONSEQUENTS, LABELS, RULES
 from nnit2fsmc_controller.neural_network import EquivalentControlNetwork
 from nnit2fsmc_controller.trajectory import Helix, Lemniscate, Waypoints, make_scenario
@@ -122,6 +123,66 @@ def test_learning_stays_bounded_with_leakage_under_persistent_teaching():
         network.learn(float(rng.normal(scale=1e3)))
     assert max(abs(w) for row in network.hidden_weights for w in row) <= 10.0
     assert max(abs(w) for w in network.output_weights) <= 10.0
+
+
+def weights(network):
+    return np.array([w for row in network.hidden_weights for w in row] + list(network.output_weights))
+
+
+@pytest.mark.parametrize('batch', [None, 3])
+def test_below_the_takeoff_height_only_the_z_network_learns(batch):
+    """takeoff_height: on the ground the x, y and attitude networks hold and the desired tilt is 0; z learns
+    (it lifts the vehicle)."""
+    gains = unflatten_gains({**flatten_gains(load_gains()), 'nnit2fsmc.takeoff_height': 0.05,
+                             'nnit2fsmc.measurement_filter_hz': 0.0})
+    controller = build_controller('nnit2fsmc', PARAMS, gains, batch=batch)
+    start = {axis: weights(law.network).copy() for axis, law in controller.laws.items()}
+    reference = Helix().sample(0.5)           # 0.5 s into the helix (its height: 5 cm)
+    zero = 0.0 if batch is None else np.zeros(batch)
+    near = [*(p + 0.01 for p in reference.position), *reference.velocity, 0.01, 0.01, reference.yaw + 0.01,
+            0.01, 0.01, reference.yaw_rate]   # every surface nonzero and inside its fuzzy universe
+    state = [value + zero for value in near]
+    state[2] = zero                             # on the ground
+    for _ in range(20):
+        out = controller.update(0.0, state, reference)
+    controller.adapt()
+    assert np.all(out.attitude_reference[0] == 0.0) and np.all(out.attitude_reference[1] == 0.0)   # level
+    for axis, law in controller.laws.items():
+        moved = np.abs(weights(law.network) - start[axis]).max()
+        assert (moved > 0.0) == (axis == 'z'), axis
+    state[2] = 0.06 + zero                      # airborne: every network learns again
+    for _ in range(20):
+        out = controller.update(0.0, state, reference)
+    controller.adapt()
+    assert np.all(out.attitude_reference[0] != 0.0)
+    assert all(np.abs(weights(law.network) - start[axis]).max() > 0.0 for axis, law in controller.laws.items())
+
+
+def test_the_takeoff_height_and_the_velocity_filter_are_off_in_the_paper_settings():
+    gains = unflatten_gains({**flatten_gains(load_gains()), **PAPER_FAITHFUL})
+    controller = build_controller('nnit2fsmc', PARAMS, gains)
+    assert controller.takeoff_height == 0.0 and controller.velocity_filter is None
+    assert controller.measurement_filter is None
+
+
+def test_velocity_filter_is_a_first_order_low_pass_of_the_velocities_only():
+    """v_hat(k) = v_hat(k-1) + b (v(k) - v_hat(k-1)), b = w dt / (1 + w dt): a unit step after k updates
+    reads 1 - (1 - b)^k; every other state component passes unchanged; a batch equals single vehicles."""
+    dt, cutoff = 0.001, 10.0
+    b = 2 * math.pi * cutoff * dt / (1 + 2 * math.pi * cutoff * dt)
+    single = VelocityFilter(dt, cutoff)
+    batch = VelocityFilter(dt, cutoff)
+    assert single([0.0] * 12) == [0.0] * 12               # the first sample passes
+    batch([np.zeros(2)] * 12)
+    step = [float(i) for i in range(12)]
+    for k in range(1, 51):
+        out = single(step)
+        rows = batch([np.full(2, v) for v in step])
+    expected = 1 - (1 - b) ** 50
+    for i in range(12):
+        want = step[i] * expected if i in (3, 4, 5) else step[i]
+        assert out[i] == pytest.approx(want, rel=1e-12)
+        np.testing.assert_allclose(rows[i], [out[i]] * 2, rtol=1e-15)
 
 
 def test_learning_rate_per_second_gives_the_same_rate_per_second_at_any_control_rate():

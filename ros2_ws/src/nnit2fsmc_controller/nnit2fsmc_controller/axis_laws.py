@@ -56,6 +56,10 @@ class NNIT2FSMCLaw:
     (reaching phase), not the error of the equivalent control, and learning from it winds the
     network up (on a descending step the z estimate fell from +4.6 N to -6 N and the vehicle
     hit the ground).
+
+    ``learning`` (a bool, or a bool array for a batch) clears the teaching of the vehicles where it
+    is false: :class:`~.controller.CascadedController` clears it while a vehicle is on the ground
+    (``takeoff_height``), where the error it would learn from cannot be corrected.
     """
 
     STATE = ('_teaching',)   #: what a retune keeps (nnit2fsmc_controller.tuning); the network's is its own
@@ -68,6 +72,7 @@ class NNIT2FSMCLaw:
         self.network = network
         self.bias_only = bias_only
         self._teaching = None   #: fuzzy term the network has yet to learn from (0 where it must not learn)
+        self.learning = True    #: False (per vehicle) holds the network: set by the controller each update
 
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         self.adapt()
@@ -75,7 +80,7 @@ class NNIT2FSMCLaw:
         surface = de + self.lam * e
         corrective = self.fuzzy(surface)
         equivalent = self.network.forward((1.0,) if self.bias_only else (ref_vel, ref_acc, 1.0))
-        self._teaching = xp.where(xp.abs(surface) < self.fuzzy.input_scale, corrective, 0.0)
+        self._teaching = xp.where((xp.abs(surface) < self.fuzzy.input_scale) & self.learning, corrective, 0.0)
         return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
 
     def adapt(self) -> None:

@@ -62,10 +62,14 @@ from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, controls_from_forces
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
 from .axis_laws import AxisOutput
-from .estimation import ComplementaryFilter
+from .estimation import ComplementaryFilter, VelocityFilter
 
 AXES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
 ATTITUDE_RATES = ('flatness', 'filter')   #: sources of the desired roll/pitch rates (module docstring)
+#: the subsystems whose networks learn only once airborne (``takeoff_height``): on the ground the vehicle can
+#: neither move horizontally nor tilt, so their errors teach nothing; z learns throughout (its network lifts the
+#: vehicle). Below that height the x, y laws' outputs are not used either: the vehicle lifts off level
+HELD_ON_GROUND = ('x', 'y', 'phi', 'theta', 'psi')
 
 
 class ControlOutput(NamedTuple):
@@ -118,13 +122,23 @@ class RateFilter:
 class CascadedController:
     """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws."""
 
-    STATE = ()   #: its state lives in its laws, rate filters and measurement filter (nnit2fsmc_controller.tuning)
+    STATE = ()   #: its state lives in its laws, rate filters, measurement and velocity filters (nnit2fsmc_controller.tuning)
 
     def __init__(self, name: str, params: VehicleParams, laws: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
-                 attitude_rates: str = 'filter', measurement_filter_hz: float = 0.0):
+                 attitude_rates: str = 'filter', measurement_filter_hz: float = 0.0, takeoff_height: float = 0.0,
+                 velocity_filter_hz: float = 0.0):
         """``measurement_filter_hz`` > 0: the laws see position and angles through a complementary
-        filter of that crossover (:mod:`.estimation`); 0 feeds them the measurement as it is."""
+        filter of that crossover (:mod:`.estimation`); 0 feeds them the measurement as it is.
+        ``velocity_filter_hz`` > 0: they see the measured velocities through a first-order low-pass
+        of that cutoff (:class:`.estimation.VelocityFilter`, after the complementary filter, which
+        integrates the measured velocities as they are); 0: as measured.
+
+        ``takeoff_height`` > 0 [m, world z; the ground is z = 0]: while a vehicle's (filtered) height is
+        not above it, the networks of HELD_ON_GROUND do not learn (the laws' ``learning`` flag; laws
+        without one are not affected) and the desired roll and pitch are 0 (the x, y laws' outputs are
+        replaced by a zero horizontal acceleration: level on the ground); 0: the laws act and learn
+        from the first update (paper)."""
         missing = [axis for axis in AXES if axis not in laws]
         if missing:
             raise ValueError(f'controller {name}: no law for axes {missing}')
@@ -140,6 +154,11 @@ class CascadedController:
         self.attitude_rates = attitude_rates
         self.measurement_filter = (ComplementaryFilter(self.dt, measurement_filter_hz)
                                    if check_number('measurement_filter_hz', measurement_filter_hz, 0.0) > 0.0 else None)
+        self.velocity_filter = (VelocityFilter(self.dt, velocity_filter_hz)
+                                if check_number('velocity_filter_hz', velocity_filter_hz, 0.0) > 0.0 else None)
+        self.takeoff_height = check_number('takeoff_height', takeoff_height, 0.0)
+        self._held_on_ground = ([laws[axis] for axis in HELD_ON_GROUND if hasattr(laws[axis], 'learning')]
+                                if self.takeoff_height > 0.0 else [])
         self._max_horizontal = params.g * math.tan(self.max_tilt)
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
 
@@ -153,16 +172,25 @@ class CascadedController:
         p = self.params
         if self.measurement_filter is not None:
             state = self.measurement_filter(state)
+        if self.velocity_filter is not None:
+            state = self.velocity_filter(state)
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
-        (xd, yd, zd), (vxd, vyd, vzd), (axd, ayd, azd) = reference.position, reference.velocity, reference.acceleration
         laws = self.laws
+        if self._held_on_ground:
+            airborne = z > self.takeoff_height
+            for law in self._held_on_ground:
+                law.learning = airborne
+        (xd, yd, zd), (vxd, vyd, vzd), (axd, ayd, azd) = reference.position, reference.velocity, reference.acceleration
         cphi, ctheta = xp.cos(phi), xp.cos(theta)
 
         out_x = laws['x'].update(x - xd, vx - vxd, vxd, axd, -p.Kfx * vx / p.m, 1.0)
         out_y = laws['y'].update(y - yd, vy - vyd, vyd, ayd, -p.Kfy * vy / p.m, 1.0)
         out_z = laws['z'].update(z - zd, vz - vzd, vzd, azd, -p.g - p.Kfz * vz / p.m, cphi * ctheta / p.m)
 
-        phi_d, theta_d = self.attitude_from_accelerations(out_x.value, out_y.value, psi)
+        ax_cmd, ay_cmd = out_x.value, out_y.value
+        if self._held_on_ground:   # level on the ground: tilting cannot move it, and tips it over at lift-off
+            ax_cmd, ay_cmd = xp.where(airborne, ax_cmd, 0.0), xp.where(airborne, ay_cmd, 0.0)
+        phi_d, theta_d = self.attitude_from_accelerations(ax_cmd, ay_cmd, psi)
         f = self._filters
         if self.attitude_rates == 'flatness':
             phi_r, dphi_r, ddphi_r, theta_r, dtheta_r, ddtheta_r = self.flat_attitude(

@@ -55,3 +55,43 @@ class ComplementaryFilter:
         for (q, _), value in zip(PAIRS, estimate):
             state[q] = value
         return state
+
+
+#: the measured world velocities vx, vy, vz [m/s] in the controller's 12-state
+VELOCITIES = (3, 4, 5)
+
+
+class VelocityFilter:
+    """filter(state) -> the state with the measured world velocities vx, vy, vz [m/s] low-passed.
+
+    In S = de + lambda e the velocity error is the derivative action of the position subsystems
+    (x, y: the desired tilt, and through its filtered derivative the attitude surfaces; z: U1), so
+    velocity noise reaches the controls at the full control rate. The first-order low-pass
+
+        v_hat(k) = v_hat(k-1) + b (v(k) - v_hat(k-1)),  b = w dt / (1 + w dt),  w = 2 pi cutoff_hz
+
+    is the usual filter of a derivative term (Astrom & Murray, *Feedback Systems*, 2008, sec. 10.5);
+    at a cutoff well above the position loops' bandwidth (about 1 Hz) its lag costs them little
+    phase. The Euler rates are not filtered: the attitude loops are faster, and their lag would cost
+    delay margin. The first sample passes unchanged.
+    """
+
+    STATE = ('_velocity',)   #: what a retune keeps (nnit2fsmc_controller.tuning)
+
+    def __init__(self, dt: float, cutoff_hz: float):
+        self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
+        omega = 2.0 * math.pi * check_number('velocity_filter_hz', cutoff_hz, 0.0, low_inclusive=False)
+        self.blend = omega * self.dt / (1.0 + omega * self.dt)
+        self._velocity = None
+
+    def __call__(self, state) -> list:
+        state = list(state)
+        measured = [state[i] for i in VELOCITIES]
+        if self._velocity is None:
+            velocity = measured
+        else:
+            velocity = [old + self.blend * (new - old) for old, new in zip(self._velocity, measured)]
+        self._velocity = velocity
+        for i, value in zip(VELOCITIES, velocity):
+            state[i] = value
+        return state

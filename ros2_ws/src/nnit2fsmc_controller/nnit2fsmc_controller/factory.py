@@ -33,6 +33,8 @@ PAPER_FAITHFUL: dict = {
     'nnit2fsmc.learning_rate_unit': 'per_update',
     'nnit2fsmc.modification': 'none',
     'nnit2fsmc.measurement_filter_hz': 0.0,
+    'nnit2fsmc.takeoff_height': 0.0,
+    'nnit2fsmc.velocity_filter_hz': 0.0,
     'nnit2fsmc.axes.x.learning_rate': 0.01, 'nnit2fsmc.axes.y.learning_rate': 0.01,
     'nnit2fsmc.axes.z.learning_rate': 0.002, 'nnit2fsmc.axes.phi.learning_rate': 0.05,
     'nnit2fsmc.axes.theta.learning_rate': 0.05, 'nnit2fsmc.axes.psi.learning_rate': 30.0,
@@ -157,7 +159,11 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
         kind, params, laws, dt, **structure,
         attitude_rates=_get(gains, 'common.attitude_rates'),
         measurement_filter_hz=(_non_negative(gains, 'nnit2fsmc.measurement_filter_hz')
-                               if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0))
+                               if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0),
+        takeoff_height=(_non_negative(gains, 'nnit2fsmc.takeoff_height')
+                        if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0),
+        velocity_filter_hz=(_non_negative(gains, 'nnit2fsmc.velocity_filter_hz')
+                            if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0))
 
 
 def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt: float,
@@ -221,6 +227,9 @@ GAIN_DESCRIPTIONS = {
                   'clipped, paper-faithful)',
     'attitude_rates': 'desired roll/pitch rates: flatness (from the reference jerk and snap) or filter (paper)',
     'measurement_filter_hz': 'crossover of the complementary filter of measured position and angles [Hz] (0: none, paper)',
+    'velocity_filter_hz': 'cutoff of the first-order low-pass of the measured velocities [Hz] (0: none, paper)',
+    'takeoff_height': 'height [m, ground at z = 0] below which the vehicle is kept level and the x, y and attitude '
+                      'networks do not learn (0: off, paper)',
     'modification': 'leakage of the NN learning: none (paper), sigma (sigma-modification) or e (e-modification)',
     'leakage': 'leakage rate sigma of the sigma- or e-modification [1/s]',
     'lambda': 'sliding-surface slope lambda of S = de + lambda e [1/s]',
