@@ -25,15 +25,21 @@ PAIRS = ((0, 3), (1, 4), (2, 5), (6, 9), (7, 10), (8, 11))
 YAW = 8
 
 
+def first_order_blend(dt: float, frequency_hz: float, key: str) -> tuple[float, float]:
+    """(dt, b): the checked sample time dt [s] and the blend b = w dt / (1 + w dt), w = 2 pi frequency_hz,
+    of a discrete first-order filter x(k) = x(k-1) + b (u(k) - x(k-1)); ``key`` names the frequency's gain."""
+    dt = check_number('dt', dt, 0.0, low_inclusive=False)
+    omega = 2.0 * math.pi * check_number(key, frequency_hz, 0.0, low_inclusive=False)
+    return dt, omega * dt / (1.0 + omega * dt)
+
+
 class ComplementaryFilter:
     """filter(state) -> the state with position and Euler angles filtered (see the module docstring)."""
 
     STATE = ('_estimate', '_rates')   #: what a retune keeps (nnit2fsmc_controller.tuning)
 
     def __init__(self, dt: float, crossover_hz: float):
-        self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
-        omega = 2.0 * math.pi * check_number('measurement_filter_hz', crossover_hz, 0.0, low_inclusive=False)
-        self.blend = omega * self.dt / (1.0 + omega * self.dt)
+        self.dt, self.blend = first_order_blend(dt, crossover_hz, 'measurement_filter_hz')
         self._estimate = None
         self._rates = None
 
@@ -79,9 +85,7 @@ class VelocityFilter:
     STATE = ('_velocity',)   #: what a retune keeps (nnit2fsmc_controller.tuning)
 
     def __init__(self, dt: float, cutoff_hz: float):
-        self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
-        omega = 2.0 * math.pi * check_number('velocity_filter_hz', cutoff_hz, 0.0, low_inclusive=False)
-        self.blend = omega * self.dt / (1.0 + omega * self.dt)
+        self.dt, self.blend = first_order_blend(dt, cutoff_hz, 'velocity_filter_hz')
         self._velocity = None
 
     def __call__(self, state) -> list:
