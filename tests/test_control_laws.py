@@ -290,13 +290,14 @@ def test_se3_is_lee_leok_mcclamroch_away_from_equilibrium():
     assert abs(reference.rates).min() > 0.1    # the desired-rate feed-forward was exercised
 
 
-def test_se3_tilt_limit_keeps_the_direction_of_the_horizontal_force():
+@pytest.mark.parametrize('height, limit_key', [(1.5, 'max_tilt'), (0.0, 'low_altitude_max_tilt')])
+def test_se3_tilt_limit_keeps_the_direction_of_the_horizontal_force(height, limit_key):
     controller = build_controller('se3', VEHICLE, GAINS)
-    far = ReferenceSample((4.0, -3.0, 1.5), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
-    out = controller.update(0.0, [0.0, 0.0, 1.5] + [0.0] * 9, far)
+    far = ReferenceSample((4.0, -3.0, height), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
+    out = controller.update(0.0, [0.0, 0.0, height] + [0.0] * 9, far)
     phi_d, theta_d, _ = out.attitude_reference
     tilt = math.acos(math.cos(phi_d) * math.cos(theta_d))
-    assert tilt == pytest.approx(GAINS['common']['max_tilt'], abs=1e-12)
+    assert tilt == pytest.approx(GAINS['common'][limit_key], abs=1e-12)
     axis = rotation(phi_d, theta_d, 0.0)[:, 2]
     assert math.atan2(axis[1], axis[0]) == pytest.approx(math.atan2(-3.0, 4.0), abs=1e-12)
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from nnit2fsmc_controller.axis_laws import AxisOutput, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
-from nnit2fsmc_controller.controller import AXES, CascadedController, RateFilter
+from nnit2fsmc_controller.controller import AXES, CascadedController, RateFilter, TiltLimit
 from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, control_period, load_gains
 from quad_msgs_bridge.frames import rotation_from_euler
 from quad_msgs_bridge.mixer import controls_from_forces
@@ -29,32 +29,48 @@ def realised_horizontal_acceleration(phi, theta, psi):
 def test_eq10_attitude_realises_the_commanded_acceleration_at_any_heading(seed):
     rng = np.random.default_rng(seed)
     controller = build_controller('nnit2fsmc', PARAMS, GAINS)
-    limit = PARAMS.g * math.tan(controller.max_tilt)
+    limit = PARAMS.g * math.tan(controller.tilt_limit.max_tilt)
     ax, ay = rng.uniform(-1.0, 1.0, 2) * limit / math.sqrt(2.0)   # inside the tilt limit
     psi = float(rng.uniform(-math.pi, math.pi))
-    phi_d, theta_d = controller.attitude_from_accelerations(ax, ay, psi)
+    phi_d, theta_d = controller.attitude_from_accelerations(ax, ay, psi, 1.0)
     np.testing.assert_allclose(realised_horizontal_acceleration(phi_d, theta_d, psi), (ax, ay), atol=1e-12)
 
 
 def test_eq10_small_angle_form_at_zero_yaw():
     """theta_d ~ v_x / g and phi_d ~ -v_y / g: the x law drives the pitch, the y law the roll."""
     controller = build_controller('nnit2fsmc', PARAMS, GAINS)
-    phi_d, theta_d = controller.attitude_from_accelerations(0.01, 0.02, 0.0)
+    phi_d, theta_d = controller.attitude_from_accelerations(0.01, 0.02, 0.0, 1.0)
     # the exact form differs from the linear one at second order: (0.02 / g)^2 ~ 4e-6 relative
     assert theta_d == pytest.approx(0.01 / PARAMS.g, rel=1e-4)
     assert phi_d == pytest.approx(-0.02 / PARAMS.g, rel=1e-4)
 
 
+def tilt_of(phi, theta):
+    """Angle [rad] between the thrust axis and the vertical."""
+    return math.acos(math.cos(phi) * math.cos(theta))
+
+
 @pytest.mark.parametrize('psi', [0.0, 1.0, -2.8])
-def test_eq10_tilt_limit_keeps_the_direction(psi):
+@pytest.mark.parametrize('height, tilt', [(1.0, 0.8), (0.15, 0.8), (0.149, 0.6), (0.0, 0.6), (-0.01, 0.6)])
+def test_eq10_tilt_limit_keeps_the_direction(psi, height, tilt):
+    """The packaged limit: 0.8 rad from 0.15 m up, 0.6 rad below."""
+    assert (GAINS['common']['max_tilt'], GAINS['common']['low_altitude_max_tilt'],
+            GAINS['common']['low_altitude_height']) == (0.8, 0.6, 0.15)
     controller = build_controller('nnit2fsmc', PARAMS, GAINS)
-    ax, ay = 30.0, -40.0          # 50 m/s^2: far beyond g tan(max_tilt)
-    phi_d, theta_d = controller.attitude_from_accelerations(ax, ay, psi)
+    ax, ay = 30.0, -40.0          # 50 m/s^2: far beyond g tan(0.8)
+    phi_d, theta_d = controller.attitude_from_accelerations(ax, ay, psi, height)
     realised = realised_horizontal_acceleration(phi_d, theta_d, psi)
-    np.testing.assert_allclose(realised, np.array([ax, ay]) / 50.0 * PARAMS.g * math.tan(controller.max_tilt),
-                               atol=1e-12)
-    tilt = math.acos(math.cos(phi_d) * math.cos(theta_d))
-    assert tilt == pytest.approx(controller.max_tilt, abs=1e-12)
+    np.testing.assert_allclose(realised, np.array([ax, ay]) / 50.0 * PARAMS.g * math.tan(tilt), atol=1e-12)
+    assert tilt_of(phi_d, theta_d) == pytest.approx(tilt, abs=1e-12)
+
+
+def test_tilt_limit_batch_equals_single_vehicles_and_switches_off():
+    limit = TiltLimit(0.8, 0.6, 0.15)
+    heights = np.array([-1.0, 0.0, 0.1, 0.15, 7.0])
+    np.testing.assert_array_equal(limit.tangent(heights), [limit.tangent(float(z)) for z in heights])
+    np.testing.assert_array_equal(limit.tangent(heights), np.tan([0.6, 0.6, 0.6, 0.8, 0.8]))
+    for off in (TiltLimit(0.8, 0.6, 0.0), TiltLimit(0.8, 0.9, 0.15), TiltLimit(0.8)):
+        assert off.tangent(0.0) == off.tangent(0.05) == math.tan(0.8)   # max_tilt at every height
 
 
 def network_weights(controller):
@@ -213,6 +229,9 @@ def edited(dotted, value):
     ('nnit2fsmc', 'common.lambda.z', -3.0, 'common.lambda.z'),
     ('pid', 'common.lambda.psi', math.nan, 'common.lambda.psi'),
     ('nnit2fsmc', 'common.max_tilt', 2.0, 'max_tilt'),
+    ('pid', 'common.low_altitude_max_tilt', 0.0, 'common.low_altitude_max_tilt'),
+    ('se3', 'common.low_altitude_height', -0.1, 'common.low_altitude_height'),
+    ('nnit2fsmc', 'common.low_altitude_height', KeyError, 'common.low_altitude_height'),
     ('smc-sat', 'common.angle_filter_tau', 0.0, 'common.angle_filter_tau'),
     ('nnit2fsmc', 'nnit2fsmc.axes.x.input_scale', 0.0, 'nnit2fsmc.axes.x.input_scale'),
     ('nnit2fsmc', 'nnit2fsmc.axes.theta.fuzzy_gain', -1.0, 'nnit2fsmc.axes.theta.fuzzy_gain'),

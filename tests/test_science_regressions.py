@@ -236,12 +236,13 @@ def test_flatness_rates_are_the_time_derivatives_of_the_eq10_attitude(trajectory
 
     def attitude(t):
         r = trajectory.sample(t)
-        return np.array(controller.attitude_from_accelerations(r.acceleration[0], r.acceleration[1], r.yaw))
+        return np.array(controller.attitude_from_accelerations(r.acceleration[0], r.acceleration[1], r.yaw, r.position[2]))
 
     for t in np.linspace(1.0, 30.0, 31):
         r = trajectory.sample(float(t))
         phi, dphi, ddphi, theta, dtheta, ddtheta = controller.flat_attitude(
-            r.acceleration[0], r.acceleration[1], r.jerk[:2], r.snap[:2], r.yaw, r.yaw_rate, r.yaw_acceleration)
+            r.acceleration[0], r.acceleration[1], r.jerk[:2], r.snap[:2], r.yaw, r.yaw_rate, r.yaw_acceleration,
+            r.position[2])
         before, now, after = attitude(t - h), attitude(t), attitude(t + h)
         assert (phi, theta) == tuple(now)   # eq. (10) itself, with the same arithmetic
         if np.abs(after - before).max() > 1.0:   # yaw wrap of the helix between the samples
@@ -251,11 +252,12 @@ def test_flatness_rates_are_the_time_derivatives_of_the_eq10_attitude(trajectory
     # one code path: a batch of the same inputs gives the same numbers
     r = trajectory.sample(7.3)
     ones = np.ones(3)
+    heights = np.array([0.0, 0.1, 2.0])   # on the ground, in the low-altitude band, above it
     batch = controller.flat_attitude(r.acceleration[0] * ones, r.acceleration[1] * ones, r.jerk[:2],
-                                     r.snap[:2], r.yaw * ones, r.yaw_rate, r.yaw_acceleration)
-    single = controller.flat_attitude(r.acceleration[0], r.acceleration[1], r.jerk[:2], r.snap[:2], r.yaw,
-                                      r.yaw_rate, r.yaw_acceleration)
-    np.testing.assert_allclose(np.array(batch), np.array(single)[:, None] * ones, rtol=1e-14)
+                                     r.snap[:2], r.yaw * ones, r.yaw_rate, r.yaw_acceleration, heights)
+    single = [controller.flat_attitude(r.acceleration[0], r.acceleration[1], r.jerk[:2], r.snap[:2], r.yaw,
+                                       r.yaw_rate, r.yaw_acceleration, float(z)) for z in heights]
+    np.testing.assert_allclose(np.array(batch), np.array(single).T, rtol=1e-14)
 
 
 # ---- short closed-loop flights ------------------------------------------------------------------

@@ -19,8 +19,8 @@ eq. (1) and a vertical specific force g,
     phi_d   = atan((v_x sin psi - v_y cos psi) cos theta_d / g)
 
 which reduces to theta_d = v_x / g, phi_d = -v_y / g at small angles and psi = 0. The tilt is
-limited to ``max_tilt``. The desired angle rates and accelerations the attitude surfaces need
-come from one of two sources (``attitude_rates``):
+limited to ``max_tilt``, and to less near the ground (:class:`TiltLimit`). The desired angle rates
+and accelerations the attitude surfaces need come from one of two sources (``attitude_rates``):
 
 * ``filter`` (the paper's structure): first-order filtered differentiation of phi_d and theta_d
   (time constant ``angle_filter_tau``). phi_d and theta_d carry the position loop's feedback, so
@@ -119,6 +119,33 @@ class RateFilter:
         return self.rate
 
 
+class TiltLimit:
+    """The tilt limit by height: tan of the largest roll/pitch (tilt of the thrust axis) the position
+    loop may ask for at height z [m, world; the ground is z = 0].
+
+    ``max_tilt`` [rad] at and above ``low_altitude_height`` [m], ``low_altitude_max_tilt`` [rad] below
+    it. Near the ground a tilted vehicle trades lift for a horizontal push it has no height to spend
+    on, and a large tilt just after lift-off tips it over (docs/ADAPTIVE.md item 8).
+    ``low_altitude_height`` 0, or a ``low_altitude_max_tilt`` not below ``max_tilt``: ``max_tilt`` at every
+    height.
+    """
+
+    def __init__(self, max_tilt: float, low_altitude_max_tilt: float | None = None, low_altitude_height: float = 0.0):
+        self.max_tilt = max_tilt = check_number('max_tilt', max_tilt, 0.0, 1.4, low_inclusive=False)
+        low = max_tilt if low_altitude_max_tilt is None else check_number(
+            'low_altitude_max_tilt', low_altitude_max_tilt, 0.0, 1.4, low_inclusive=False)
+        self.height = check_number('low_altitude_height', low_altitude_height, 0.0)
+        self.high_tangent = math.tan(max_tilt)
+        self.low_tangent = math.tan(min(low, max_tilt))
+        self.constant = self.height == 0.0 or self.low_tangent == self.high_tangent
+
+    def tangent(self, z):
+        """tan(limit) at height z [m] (a float, or one per vehicle of a batch)."""
+        if self.constant:
+            return self.high_tangent
+        return namespace_for(z).where(z < self.height, self.low_tangent, self.high_tangent)
+
+
 class CascadedController:
     """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws."""
 
@@ -127,7 +154,8 @@ class CascadedController:
     def __init__(self, name: str, params: VehicleParams, laws: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
                  attitude_rates: str = 'filter', measurement_filter_hz: float = 0.0, takeoff_height: float = 0.0,
-                 velocity_filter_hz: float = 0.0):
+                 velocity_filter_hz: float = 0.0, low_altitude_max_tilt: float | None = None,
+                 low_altitude_height: float = 0.0):
         """``measurement_filter_hz`` > 0: the laws see position and angles through a complementary
         filter of that crossover (:mod:`.estimation`); 0 feeds them the measurement as it is.
         ``velocity_filter_hz`` > 0: they see the measured velocities through a first-order low-pass
@@ -138,7 +166,10 @@ class CascadedController:
         not above it, the networks of HELD_ON_GROUND do not learn (the laws' ``learning`` flag; laws
         without one are not affected) and the desired roll and pitch are 0 (the x, y laws' outputs are
         replaced by a zero horizontal acceleration: level on the ground); 0: the laws act and learn
-        from the first update (paper)."""
+        from the first update (paper).
+
+        ``max_tilt``, ``low_altitude_max_tilt`` [rad], ``low_altitude_height`` [m]: the tilt limit by
+        (filtered) height, :class:`TiltLimit`."""
         missing = [axis for axis in AXES if axis not in laws]
         if missing:
             raise ValueError(f'controller {name}: no law for axes {missing}')
@@ -146,7 +177,7 @@ class CascadedController:
         self.params = params
         self.laws = laws
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
-        self.max_tilt = check_number('max_tilt', max_tilt, 0.0, 1.4, low_inclusive=False)
+        self.tilt_limit = TiltLimit(max_tilt, low_altitude_max_tilt, low_altitude_height)
         tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
         self.allocation = check_allocation(allocation)
         if attitude_rates not in ATTITUDE_RATES:
@@ -159,7 +190,6 @@ class CascadedController:
         self.takeoff_height = check_number('takeoff_height', takeoff_height, 0.0)
         self._held_on_ground = ([laws[axis] for axis in HELD_ON_GROUND if hasattr(laws[axis], 'learning')]
                                 if self.takeoff_height > 0.0 else [])
-        self._max_horizontal = params.g * math.tan(self.max_tilt)
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
 
     def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
@@ -190,11 +220,12 @@ class CascadedController:
         ax_cmd, ay_cmd = out_x.value, out_y.value
         if self._held_on_ground:   # level on the ground: tilting cannot move it, and tips it over at lift-off
             ax_cmd, ay_cmd = xp.where(airborne, ax_cmd, 0.0), xp.where(airborne, ay_cmd, 0.0)
-        phi_d, theta_d = self.attitude_from_accelerations(ax_cmd, ay_cmd, psi)
+        phi_d, theta_d = self.attitude_from_accelerations(ax_cmd, ay_cmd, psi, z)
         f = self._filters
         if self.attitude_rates == 'flatness':
             phi_r, dphi_r, ddphi_r, theta_r, dtheta_r, ddtheta_r = self.flat_attitude(
-                axd, ayd, reference.jerk[:2], reference.snap[:2], psi, reference.yaw_rate, reference.yaw_acceleration)
+                axd, ayd, reference.jerk[:2], reference.snap[:2], psi, reference.yaw_rate, reference.yaw_acceleration,
+                z)
             dphi_d = dphi_r + f['dphi'].update(phi_d - phi_r)
             dtheta_d = dtheta_r + f['dtheta'].update(theta_d - theta_r)
         else:
@@ -236,18 +267,18 @@ class CascadedController:
         """The sliding-surface slopes lambda [1/s] of the subsystems, in AXES order (``control/diagnostics``)."""
         return tuple(self.laws[axis].lam for axis in AXES)
 
-    def _tilt_scale(self, ax, ay):
-        """Factor (<= 1) that brings the horizontal acceleration (ax, ay) [m/s^2] within the tilt limit."""
-        xp = namespace_for(ax, ay)
-        limit = self._max_horizontal
+    def _tilt_scale(self, ax, ay, z):
+        """Factor (<= 1) that brings the horizontal acceleration (ax, ay) [m/s^2] within the tilt limit at height z [m]."""
+        limit = self.params.g * self.tilt_limit.tangent(z)
+        xp = namespace_for(ax, ay, limit)
         return limit / xp.maximum(xp.hypot(ax, ay), limit)
 
-    def flat_attitude(self, ax, ay, jerk, snap, psi, dpsi, ddpsi):
+    def flat_attitude(self, ax, ay, jerk, snap, psi, dpsi, ddpsi, z):
         """(phi_d, dphi_d, ddphi_d, theta_d, dtheta_d, ddtheta_d) [rad, rad/s, rad/s^2]: eq. (10) at
         (ax, ay) [m/s^2] and yaw psi [rad] (:meth:`attitude_from_accelerations`, the same arithmetic)
         and its time derivatives when the acceleration changes with ``jerk`` (jx, jy) [m/s^3] and
         ``snap`` (sx, sy) [m/s^4] and the yaw with dpsi [rad/s], ddpsi [rad/s^2] (differential
-        flatness). Beyond the tilt limit the three are scaled like the acceleration.
+        flatness). Beyond the tilt limit at height z [m] the three are scaled like the acceleration.
 
         With A = ax cos psi + ay sin psi, B = ax sin psi - ay cos psi, theta_d = atan(A / g) and
         phi_d = atan(C), C = B cos(theta_d) / g:
@@ -258,7 +289,7 @@ class CascadedController:
           phi' = C' / (1 + C^2),  phi'' = C'' / (1 + C^2) - 2 C C'^2 / (1 + C^2)^2
         """
         xp = namespace_for(ax, ay, psi)
-        scale = self._tilt_scale(ax, ay)
+        scale = self._tilt_scale(ax, ay, z)
         ax, ay = ax * scale, ay * scale
         (jx, jy), (sx, sy) = jerk, snap
         jx, jy, sx, sy = jx * scale, jy * scale, sx * scale, sy * scale
@@ -281,13 +312,13 @@ class CascadedController:
         r = 1.0 + cc * cc
         return xp.atan(cc), dc / r, ddc / r - 2.0 * cc * dc * dc / (r * r), theta, dtheta, ddtheta
 
-    def attitude_from_accelerations(self, ax, ay, psi):
+    def attitude_from_accelerations(self, ax, ay, psi, z):
         """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi.
 
-        Beyond the tilt limit the acceleration is scaled down to it, its direction kept.
+        Beyond the tilt limit at height z [m, world] the acceleration is scaled down to it, its direction kept.
         """
         xp = namespace_for(psi)
-        scale = self._tilt_scale(ax, ay)
+        scale = self._tilt_scale(ax, ay, z)
         ax, ay = ax * scale, ay * scale
         g = self.params.g
         cpsi, spsi = xp.cos(psi), xp.sin(psi)

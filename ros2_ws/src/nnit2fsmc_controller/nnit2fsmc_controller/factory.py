@@ -26,10 +26,13 @@ NN_INPUTS = 3   # (ref_vel, ref_acc, 1), see NNIT2FSMCLaw
 #: together they fly the nominal tables' "paper-faithful" rows
 PAPER_FAITHFUL: dict = {
     'common.attitude_rates': 'filter',
+    'common.max_tilt': 0.6, 'common.low_altitude_height': 0.0,
     'common.allocation': 'clip',
     'common.lambda.phi': 12.0, 'common.lambda.theta': 12.0,
     'nnit2fsmc.axes.x.input_scale': 0.3, 'nnit2fsmc.axes.y.input_scale': 0.3,
     'nnit2fsmc.axes.x.fuzzy_gain': 3.0, 'nnit2fsmc.axes.y.fuzzy_gain': 3.0,
+    'nnit2fsmc.axes.phi.input_scale': 2.0, 'nnit2fsmc.axes.theta.input_scale': 2.0,
+    'nnit2fsmc.axes.phi.fuzzy_gain': 1.0, 'nnit2fsmc.axes.theta.fuzzy_gain': 1.0,
     'nnit2fsmc.learning_rate_unit': 'per_update',
     'nnit2fsmc.modification': 'none',
     'nnit2fsmc.measurement_filter_hz': 0.0,
@@ -123,6 +126,8 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
     dt = control_period(gains)
     lam = {axis: _positive(gains, f'common.lambda.{axis}') for axis in AXES}
     structure = dict(max_tilt=_positive(gains, 'common.max_tilt'),
+                     low_altitude_max_tilt=_positive(gains, 'common.low_altitude_max_tilt'),
+                     low_altitude_height=_non_negative(gains, 'common.low_altitude_height'),
                      angle_filter_tau=_positive(gains, 'common.angle_filter_tau'),
                      allocation=gains.get('common', {}).get('allocation', 'priority'))
     if kind == 'se3':
@@ -221,7 +226,10 @@ def unflatten_gains(flat: Mapping[str, Any]) -> dict:
 #: what each gain means, by the last non-axis component of its name
 GAIN_DESCRIPTIONS = {
     'control_rate': 'controller update rate [Hz] (equals the simulator odometry rate)',
-    'max_tilt': 'largest roll/pitch the position loop may ask for [rad]',
+    'max_tilt': 'largest roll/pitch the position loop may ask for [rad] (at and above low_altitude_height)',
+    'low_altitude_max_tilt': 'largest roll/pitch the position loop may ask for below low_altitude_height [rad]',
+    'low_altitude_height': 'height [m, ground at z = 0] below which the tilt limit is low_altitude_max_tilt '
+                           '(0: max_tilt at every height)',
     'angle_filter_tau': 'time constant of the desired-angle differentiation filter [s]',
     'allocation': 'rotor limits: priority (U1 kept, then roll/pitch scaled to fit, yaw last) or clip (each rotor '
                   'clipped, paper-faithful)',

@@ -9,7 +9,7 @@ e_x = x - x_d, e_v = v - v_d [m, m/s, world], I_x = int(e_x) dt (clamped) and ma
 
     F_d   = m (-k_x e_x - k_v e_v - k_i I_x + g e3 + xdd_d)                          [N, world]
     f     = F_d . R e3                                                                 (U1 [N])
-    b3_d  = F_d / |F_d|  (horizontal part limited to the tilt max_tilt, vertical part >= 0.1 m g)
+    b3_d  = F_d / |F_d|  (horizontal part limited to the tilt limit at the height z, TiltLimit; vertical part >= 0.1 m g)
     R_d   = Rz(psi_d) Ry(theta_d) Rx(phi_d) with R_d e3 = b3_d and the reference heading psi_d
     e_R   = 1/2 vee(R_d^T R - R^T R_d),   e_W = Omega - R^T R_d Omega_d,   I_R = int(e_R) dt (clamped)
     M     = -J (k_R e_R + k_W e_W + k_I I_R) + Omega x J Omega
@@ -38,7 +38,6 @@ namespace of :mod:`quad_msgs_bridge.numeric`.
 """
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 from quad_msgs_bridge.frames import body_rates_from_euler_rates, rotation_from_euler
@@ -48,7 +47,7 @@ from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
 
 from .axis_laws import AxisOutput
-from .controller import AXES, ControlOutput, RateFilter, check_allocation, check_finite
+from .controller import AXES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_finite
 
 #: minimum vertical part of the desired force, in units of m g (keeps b3_d pointing up)
 MIN_LIFT = 0.1
@@ -102,14 +101,15 @@ class SE3Controller:
     STATE = ('position_integral', 'attitude_integral')   #: with its rate filters' (nnit2fsmc_controller.tuning)
 
     def __init__(self, name: str, params: VehicleParams, gains: dict, lam: dict, dt: float,
-                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority'):
+                 max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
+                 low_altitude_max_tilt: float | None = None, low_altitude_height: float = 0.0):
         self.name = name
         self.params = params
         self.gains = {axis: tuple(check_number(f'se3.axes.{axis}', value, 0.0) for value in gains[axis])
                       for axis in AXES}
         self.lam = {axis: check_number('lambda', lam[axis], 0.0, low_inclusive=False) for axis in AXES}
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
-        self.max_tilt = check_number('max_tilt', max_tilt, 0.0, 1.4, low_inclusive=False)
+        self.tilt_limit = TiltLimit(max_tilt, low_altitude_max_tilt, low_altitude_height)
         tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
         self.allocation = check_allocation(allocation)
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
@@ -146,7 +146,7 @@ class SE3Controller:
         force[2] = force[2] + p.m * p.g
         lift = xp.maximum(force[2], MIN_LIFT * p.m * p.g)
         horizontal = xp.hypot(force[0], force[1])
-        allowed = lift * math.tan(self.max_tilt)
+        allowed = lift * self.tilt_limit.tangent(z)
         shrink = xp.minimum(1.0, allowed / xp.maximum(horizontal, 1e-12 * p.m * p.g))
         force[0], force[1] = force[0] * shrink, force[1] * shrink
 
