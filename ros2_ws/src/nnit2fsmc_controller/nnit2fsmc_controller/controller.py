@@ -130,6 +130,8 @@ class TiltLimit:
     height.
     """
 
+    STATE = ()   #: stateless: a retune takes the new one whole (nnit2fsmc_controller.tuning)
+
     def __init__(self, max_tilt: float, low_altitude_max_tilt: float | None = None, low_altitude_height: float = 0.0):
         self.max_tilt = max_tilt = check_number('max_tilt', max_tilt, 0.0, 1.4, low_inclusive=False)
         low = max_tilt if low_altitude_max_tilt is None else check_number(
