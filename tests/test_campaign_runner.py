@@ -15,6 +15,7 @@ import yaml
 from flight_stack.campaign.results import read_flights, wilson_interval
 from flight_stack.campaign.runner import RunOptions, run_campaign
 from flight_stack.campaign.spec import parse_spec
+from nnit2fsmc_controller.factory import load_gains
 from quad_msgs_bridge.vehicle_params import ParameterError
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -160,6 +161,19 @@ def test_bad_options_are_refused_before_flying(tmp_path, args, message):
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 2 and stderr.startswith(f'error: {message}'), stderr
     assert not (tmp_path / 'out' / 'flights.csv').exists()
+
+
+def test_a_gains_file_wrong_for_a_controller_of_the_spec_is_refused_before_flying(tmp_path):
+    spec_file = tmp_path / 'spec.yaml'
+    spec_file.write_text(yaml.safe_dump(DOCUMENT))
+    gains = load_gains()
+    gains['common']['low_altitude_height'] = -1.0
+    gains_file = tmp_path / 'gains.yaml'
+    gains_file.write_text(yaml.safe_dump(gains))
+    process = run_cli(spec_file, '--out', tmp_path / 'out', '--gains', gains_file)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 2 and 'error: common.low_altitude_height: -1.0 is outside' in stderr, stderr
+    assert not (tmp_path / 'out').exists()
 
 
 def test_a_campaign_without_perturbations_reports_cleanly(tmp_path):

@@ -72,6 +72,12 @@ class CampaignSetup:
         return cls(nominal, disturbances, gains, control_dt, 1.0 / physics_rate, substeps,
                    make_scenario(spec.scenario, spec.duration))
 
+    def check_controllers(self, controllers) -> None:
+        """ParameterError naming the first gain the gains file gets wrong for one of ``controllers``
+        (each is built once for the nominal vehicle), so that a campaign fails before it flies."""
+        for kind in controllers:
+            build_controller(kind, self.nominal, self.gains)
+
     def rules(self, spec: CampaignSpec) -> FailureRules:
         return FailureRules(settle_time=spec.settle_time, max_error=spec.max_error_m)
 

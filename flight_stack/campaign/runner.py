@@ -152,7 +152,8 @@ def run_campaign(spec: CampaignSpec, out_dir: Path, options: RunOptions) -> Camp
     stopping the workers on Ctrl-C (every finished batch is in flights.csv).
     """
     workers = options.worker_count()
-    CampaignSetup.of(spec, options.vehicle_file, options.gains_file)   # files and rates valid before flying
+    # files, rates and every controller's gains valid before flying
+    CampaignSetup.of(spec, options.vehicle_file, options.gains_file).check_controllers(spec.controllers)
     done = prepare_output(spec, out_dir, options.resume)
     jobs = plan_jobs(spec, done, options, workers)
     total = sum(len(job.flights) for job in jobs)
