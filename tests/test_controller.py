@@ -64,6 +64,18 @@ def test_eq10_tilt_limit_keeps_the_direction(psi, height, tilt):
     assert tilt_of(phi_d, theta_d) == pytest.approx(tilt, abs=1e-12)
 
 
+@pytest.mark.parametrize('kind', [k for k in CONTROLLERS if k not in ('smc-sign', 'smc-sat')])
+@pytest.mark.parametrize('height, tilt', [(1.0, 0.8), (0.1, 0.6)])
+def test_every_controller_asks_for_the_tilt_limit_of_its_height(kind, height, tilt):
+    """50 m off in x and y: the controller asks for the largest tilt, the limit at the vehicle's height (above the
+    NNIT2FSMC's take-off height of 0.05 m, so its x, y laws act). (The paper-style SMCs' switching gain,
+    0.3 m/s^2, never reaches the limit.)"""
+    far = ReferenceSample((50.0, 50.0, height), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
+    out = build_controller(kind, PARAMS, GAINS).update(0.0, [0.0, 0.0, height] + [0.0] * 9, far)
+    phi_d, theta_d, _ = out.attitude_reference
+    assert tilt_of(phi_d, theta_d) == pytest.approx(tilt, abs=1e-9)
+
+
 def test_tilt_limit_batch_equals_single_vehicles_and_switches_off():
     limit = TiltLimit(0.8, 0.6, 0.15)
     heights = np.array([-1.0, 0.0, 0.1, 0.15, 7.0])
