@@ -23,7 +23,7 @@ def random_network(seed, n_inputs=3, n_hidden=5):
     network = EquivalentControlNetwork(n_inputs, n_hidden, output_gain=float(rng.uniform(0.5, 10.0)),
                                        learning_rate=0.01, weight_limit=10.0, seed=seed)
     # non-zero output weights: with the default zero start the hidden-layer gradient would vanish trivially
-    network.output_weights = [float(w) for w in rng.uniform(-2.0, 2.0, n_hidden)]
+    network.output_weights = rng.uniform(-2.0, 2.0, n_hidden)
     inputs = tuple(float(z) for z in rng.uniform(-2.0, 2.0, n_inputs))
     return network, inputs, float(rng.uniform(-3.0, 3.0))
 
@@ -89,7 +89,7 @@ def test_zero_learning_rate_freezes_the_weights():
     before = copy.deepcopy((network.output_weights, network.hidden_weights))
     network.forward((0.3, -0.2, 1.0))
     network.learn(5.0)
-    assert (network.output_weights, network.hidden_weights) == before
+    assert np.array_equal(network.output_weights, before[0]) and np.array_equal(network.hidden_weights, before[1])
 
 
 def test_projection_keeps_weights_bounded_under_adversarial_fuzzy_terms():
@@ -112,7 +112,7 @@ def test_network_starts_at_zero_and_is_seeded():
     b = EquivalentControlNetwork(3, 5, output_gain=2.0, learning_rate=0.1, seed=7)
     c = EquivalentControlNetwork(3, 5, output_gain=2.0, learning_rate=0.1, seed=8)
     assert a.forward((1.0, 2.0, 1.0)) == 0.0          # zero output weights: knows nothing yet
-    assert a.hidden_weights == b.hidden_weights != c.hidden_weights
+    assert np.array_equal(a.hidden_weights, b.hidden_weights) and not np.array_equal(a.hidden_weights, c.hidden_weights)
 
 
 @pytest.mark.parametrize('measure', ['ideal', 'it2-fuzzy'])

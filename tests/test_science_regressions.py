@@ -82,34 +82,34 @@ def test_nolearn_and_bias_ablations():
     nolearn, bias = law('nnit2fsmc-nolearn'), law('nnit2fsmc-bias')
     assert nolearn.network.learning_rate == 0.0 and law('nnit2fsmc').network.learning_rate > 0.0
     assert len(bias.network.hidden_weights[0]) == 1 and bias.bias_only
-    before = [list(row) for row in nolearn.network.hidden_weights], list(nolearn.network.output_weights)
+    before = weights(nolearn.network)
     for k in range(50):
         nolearn.update(0.05, 0.1, 0.5 * k, 0.2, 0.0, 1.0)
     nolearn.adapt()
-    assert ([list(row) for row in nolearn.network.hidden_weights], list(nolearn.network.output_weights)) == before
+    assert np.array_equal(weights(nolearn.network), before)
 
 
 def test_sigma_modification_relaxes_to_the_initial_weights_without_teaching():
     """sigma-modification: with zero teaching, W - W0 shrinks by (1 - l) per update (l = sigma dt)."""
     network = EquivalentControlNetwork(3, 4, output_gain=1.0, learning_rate=0.5, seed=2,
                                        modification='sigma', leakage=0.01)
-    hidden0 = [list(row) for row in network.hidden_weights]
-    network.output_weights = [1.0, -2.0, 3.0, 0.5]
-    network.hidden_weights = [[w + 1.0 for w in row] for row in hidden0]
+    hidden0 = network.hidden_weights.copy()
+    network.output_weights = np.array([1.0, -2.0, 3.0, 0.5])
+    network.hidden_weights = hidden0 + 1.0
     for _ in range(100):
         network.forward((0.3, -0.2, 1.0))
         network.learn(0.0)
     factor = 0.99 ** 100
     np.testing.assert_allclose(network.output_weights, np.array([1.0, -2.0, 3.0, 0.5]) * factor, rtol=1e-12)
-    np.testing.assert_allclose(network.hidden_weights, np.array(hidden0) + factor, rtol=1e-12)
+    np.testing.assert_allclose(network.hidden_weights, hidden0 + factor, rtol=1e-12)
 
 
 def test_e_modification_leaks_in_proportion_to_the_teaching_signal():
     a = EquivalentControlNetwork(3, 4, output_gain=2.0, learning_rate=1.0, modification='e', leakage=0.1)
-    a.output_weights = [1.0] * 4
+    a.output_weights = np.ones(4)
     a.forward((0.0, 0.0, 0.0))   # zero inputs: every gradient of eqs. (8)-(9) vanishes, only the leakage acts
     a.learn(0.0)
-    assert a.output_weights == [1.0] * 4                     # no error, no leakage
+    assert np.array_equal(a.output_weights, np.ones(4))      # no error, no leakage
     a.learn(1.0)                                             # |U_fuzzy| / K_eq = 0.5: 5 % per update
     np.testing.assert_allclose(a.output_weights, [0.95] * 4, rtol=1e-12)
 
@@ -121,12 +121,12 @@ def test_learning_stays_bounded_with_leakage_under_persistent_teaching():
     for _ in range(2000):
         network.forward(tuple(rng.normal(size=2)) + (1.0,))
         network.learn(float(rng.normal(scale=1e3)))
-    assert max(abs(w) for row in network.hidden_weights for w in row) <= 10.0
-    assert max(abs(w) for w in network.output_weights) <= 10.0
+    assert np.abs(weights(network)).max() <= 10.0
 
 
 def weights(network):
-    return np.array([w for row in network.hidden_weights for w in row] + list(network.output_weights))
+    """Every weight of a network, hidden then output, as one flat array (a copy)."""
+    return np.concatenate([np.ravel(network.hidden_weights), np.ravel(network.output_weights)])
 
 
 @pytest.mark.parametrize('batch', [None, 3])

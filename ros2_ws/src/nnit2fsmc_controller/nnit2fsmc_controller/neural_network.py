@@ -25,23 +25,21 @@ so that, without persistent teaching, the weights relax back instead of drifting
 forms scale the leakage by the adaptation gain too; here it is a rate of its own, because the
 per-subsystem rates alpha span four decades and alpha sigma > 1 would make the leakage unstable.)
 
-Each equation is written once, in :class:`EquivalentControlNetwork`, on top of a small layer
-algebra with two implementations of the same six operations: :class:`ListLayers` for one vehicle
-(lists of plain floats: one network per subsystem has a few dozen weights, and pure Python is far
-faster than numpy at this size) and :class:`ArrayLayers` for a batch of B vehicles (hidden weights
-an array (H, I, B), output weights (H, B): one network per vehicle, each learning from its own
-fuzzy term, at numpy speed whatever H and I).
+Each equation is written once, for one vehicle, in the compiled kernels :func:`forward_pass`,
+:func:`error_factors` and :func:`learning_step` (numba: a network of a few dozen weights costs the
+interpreter far more than its arithmetic, and a control step runs six of them). A batch of B
+vehicles (one network per vehicle, each learning from its own fuzzy term) runs the same kernels
+vehicle after vehicle, in compiled loops: weights (B, H, I) and (B, H), one row per vehicle.
 """
 from __future__ import annotations
 
 import math
 import random
-from operator import mul
 from typing import Sequence
 
 import numpy as np
+from numba import njit
 
-from quad_msgs_bridge.numeric import BATCH, SCALAR, is_batch
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 MODIFICATIONS = ('none', 'sigma', 'e')   #: leakage of the learning law (module docstring)
@@ -52,77 +50,74 @@ def bipolar_sigmoid(x: float) -> float:
     return math.tanh(0.5 * x)
 
 
-class ListLayers:
-    """Layer operations of one vehicle's network: vectors are lists of floats, matrices lists of rows.
+@njit(cache=True)
+def forward_pass(hidden_weights, output_weights, inputs, hidden):
+    """One vehicle: U_out = g(sum_j Wy[j] Y_j), with Y_j = g(sum_i Wz[j, i] Z_i) written into ``hidden``.
 
-    Written as comprehensions over plain floats: at a few dozen weights the interpreter's cost per
-    call, not the arithmetic, is what a control step pays for, so each operation is one pass.
-    """
-
-    @staticmethod
-    def weights(values: list, batch: int | None) -> list:
-        return [list(map(float, row)) if isinstance(row, list) else float(row) for row in values]
-
-    @staticmethod
-    def activations(matrix: list, inputs: Sequence) -> list:
-        """g(sum_i W[j][i] x_i) for every row j, g the bipolar sigmoid of eq. (4) (= tanh(x / 2))."""
-        tanh = math.tanh
-        return [tanh(0.5 * sum(map(mul, row, inputs))) for row in matrix]
-
-    @staticmethod
-    def dot(vector: list, other: list):
-        return sum(map(mul, vector, other))
-
-    @staticmethod
-    def elementwise(function, *vectors) -> list:
-        """function applied to the j-th elements of the vectors, for every j."""
-        return list(map(function, *vectors))
-
-    @staticmethod
-    def leaky_outer_step(matrix: list, anchor: list, leak, steps: list, inputs: Sequence, limit: float) -> list:
-        """W[j][i] - leak (W[j][i] - W0[j][i]) - step_j x_i, every weight clipped to [-limit, limit]."""
-        rows = [[w - leak * (w - w0) - step * x for w, w0, x in zip(row, anchor_row, inputs)]
-                for row, anchor_row, step in zip(matrix, anchor, steps)]
-        if -limit <= min(map(min, rows)) and max(map(max, rows)) <= limit:   # the common case: no copy
-            return rows
-        return [SCALAR.project(row, limit) for row in rows]
-
-    @staticmethod
-    def leaky_step(vector: list, anchor: list, leak, steps: list, limit: float) -> list:
-        """w_j - leak (w_j - w0_j) - step_j, clipped to [-limit, limit]."""
-        return SCALAR.project([w - leak * (w - w0) - step for w, w0, step in zip(vector, anchor, steps)], limit)
+    g is eq. (4) as tanh(x / 2); ``inputs`` Z is a sequence of I floats, the weights (H, I) and (H,)."""
+    n_hidden, n_inputs = hidden_weights.shape
+    total = 0.0
+    for j in range(n_hidden):
+        activation = 0.0
+        for i in range(n_inputs):
+            activation += hidden_weights[j, i] * inputs[i]
+        hidden[j] = math.tanh(0.5 * activation)
+        total += output_weights[j] * hidden[j]
+    return math.tanh(0.5 * total)
 
 
-class ArrayLayers:
-    """The same operations for B vehicles: the last axis of every array is the vehicle."""
+@njit(cache=True)
+def error_factors(output_weights, hidden, output, error, output_gain, output_factors, hidden_factors):
+    """One vehicle, at the forward pass (``hidden``, ``output``) for an error ``error`` of the estimate:
+    dE/dWy[j] into ``output_factors`` and dE/dWz[j][i] / Z_i into ``hidden_factors`` (eqs. 8, 9)."""
+    common = error * output_gain * (1.0 - output * output)
+    for j in range(hidden.shape[0]):
+        y = hidden[j]
+        output_factors[j] = -0.5 * common * y
+        hidden_factors[j] = -0.25 * common * output_weights[j] * (1.0 - y * y)
 
-    @staticmethod
-    def weights(values: list, batch: int) -> np.ndarray:
-        return np.repeat(np.asarray(values, dtype=float)[..., None], batch, axis=-1)
 
-    @staticmethod
-    def activations(matrix: np.ndarray, inputs: Sequence) -> np.ndarray:
-        return np.tanh(0.5 * sum(matrix[:, i] * x for i, x in enumerate(inputs)))
+@njit(cache=True)
+def _clipped(value, limit):
+    return -limit if value < -limit else limit if value > limit else value
 
-    @staticmethod
-    def dot(vector: np.ndarray, other: np.ndarray):
-        return (vector * other).sum(axis=0)
 
-    @staticmethod
-    def elementwise(function, *vectors):
-        return function(*vectors)
+@njit(cache=True)
+def learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, inputs, hidden, output, u_fuzzy,
+                  learning_rate, output_gain, leakage, e_modification, limit):
+    """One vehicle's gradient step, eqs. (6) and (7), with leakage and projection, in place.
 
-    @staticmethod
-    def leaky_outer_step(matrix: np.ndarray, anchor: np.ndarray, leak, steps: np.ndarray, inputs: Sequence,
-                         limit: float) -> np.ndarray:
-        updated = matrix - leak * (matrix - anchor)
-        for i, x in enumerate(inputs):
-            np.subtract(updated[:, i], steps * x, out=updated[:, i])
-        return np.clip(updated, -limit, limit, out=updated)
+    Both steps use the weights of the forward pass (``hidden``, ``output`` at ``inputs``), as eqs.
+    (6)-(7) say. A zero teaching signal changes no weight (every gradient is proportional to it), so
+    unless a sigma-modification leaks the arithmetic is skipped."""
+    if learning_rate == 0.0 or (u_fuzzy == 0.0 and (leakage == 0.0 or e_modification)):
+        return
+    n_hidden, n_inputs = hidden_weights.shape
+    output_steps, hidden_steps = np.empty(n_hidden), np.empty(n_hidden)
+    error_factors(output_weights, hidden, output, learning_rate * u_fuzzy, output_gain, output_steps, hidden_steps)
+    leak = 0.0
+    if leakage > 0.0:
+        leak = leakage * (abs(u_fuzzy) / output_gain if e_modification else 1.0)
+    for j in range(n_hidden):
+        for i in range(n_inputs):
+            w = hidden_weights[j, i]
+            hidden_weights[j, i] = _clipped(w - leak * (w - hidden_anchor[j, i]) - hidden_steps[j] * inputs[i], limit)
+        w = output_weights[j]
+        output_weights[j] = _clipped(w - leak * (w - output_anchor[j]) - output_steps[j], limit)
 
-    @staticmethod
-    def leaky_step(vector: np.ndarray, anchor: np.ndarray, leak, steps: np.ndarray, limit: float) -> np.ndarray:
-        return np.clip(vector - leak * (vector - anchor) - steps, -limit, limit)
+
+@njit(cache=True)
+def _forward_batch(hidden_weights, output_weights, inputs, hidden, output):
+    for b in range(output.shape[0]):
+        output[b] = forward_pass(hidden_weights[b], output_weights[b], inputs[b], hidden[b])
+
+
+@njit(cache=True)
+def _learning_batch(hidden_weights, output_weights, hidden_anchor, output_anchor, inputs, hidden, output, u_fuzzy,
+                    learning_rate, output_gain, leakage, e_modification, limit):
+    for b in range(output.shape[0]):
+        learning_step(hidden_weights[b], output_weights[b], hidden_anchor[b], output_anchor[b], inputs[b], hidden[b],
+                      output[b], u_fuzzy[b], learning_rate, output_gain, leakage, e_modification, limit)
 
 
 class EquivalentControlNetwork:
@@ -134,7 +129,7 @@ class EquivalentControlNetwork:
     def __init__(self, n_inputs: int, n_hidden: int, output_gain: float, learning_rate: float,
                  weight_limit: float = 10.0, initial_spread: float = 0.5, seed: int = 0,
                  batch: int | None = None, modification: str = 'none', leakage: float = 0.0):
-        """``batch``: None for one vehicle (float weights), else the number of vehicles B (array weights).
+        """``batch``: None for one vehicle (float inputs and output), else the number of vehicles B.
         ``modification``: one of MODIFICATIONS, with ``leakage`` the share per update, in [0, 1) (module docstring)."""
         self.output_gain = check_number('output_gain', output_gain, 0.0, low_inclusive=False)
         self.learning_rate = check_number('learning_rate', learning_rate, 0.0)
@@ -146,18 +141,18 @@ class EquivalentControlNetwork:
         if n_inputs < 1 or n_hidden < 1:
             raise ValueError(f'network needs at least one input and one hidden unit, got {n_inputs}, {n_hidden}')
         rng = random.Random(seed)
-        self.xp = SCALAR if batch is None else BATCH
-        self.layers = ListLayers if batch is None else ArrayLayers
         initial_hidden = [[rng.uniform(-initial_spread, initial_spread) for _ in range(n_inputs)]
                           for _ in range(n_hidden)]
-        #: hidden weights Wz[j][i]: random, to break the symmetry between hidden units
-        self.hidden_weights = self.layers.weights(initial_hidden, batch)
-        #: output weights Wy[j]: zero, so the network starts knowing nothing (U_eq_hat = 0)
-        self.output_weights = self.layers.weights([0.0] * n_hidden, batch)
+        self.batch = batch
+        vehicles = () if batch is None else (batch,)
+        #: hidden weights Wz[j][i], (H, I) or (B, H, I): random, to break the symmetry between hidden units
+        self.hidden_weights = np.tile(np.array(initial_hidden), vehicles + (1, 1))
+        #: output weights Wy[j], (H,) or (B, H): zero, so the network starts knowing nothing (U_eq_hat = 0)
+        self.output_weights = np.zeros(vehicles + (n_hidden,))
         #: anchors W0 of the leakage: the initial weights
-        self._hidden_anchor, self._output_anchor = self.hidden_weights, self.output_weights
-        self._inputs: Sequence = (0.0,) * n_inputs
-        self._hidden = self.layers.weights([0.0] * n_hidden, batch)
+        self._hidden_anchor, self._output_anchor = self.hidden_weights.copy(), self.output_weights.copy()
+        self._inputs = (0.0,) * n_inputs if batch is None else np.zeros((batch, n_inputs))
+        self._hidden = np.zeros(vehicles + (n_hidden,))
         self._output = 0.0 if batch is None else np.zeros(batch)
 
     def forward(self, inputs: Sequence) -> float:
@@ -165,39 +160,30 @@ class EquivalentControlNetwork:
 
         Each input is a float (shared by every vehicle of a batch) or an array of one per vehicle.
         """
-        hidden = self.layers.activations(self.hidden_weights, inputs)
-        output = self.xp.tanh(0.5 * self.layers.dot(self.output_weights, hidden))
-        self._inputs, self._hidden, self._output = inputs, hidden, output
-        return self.output_gain * output
+        if self.batch is None:
+            self._inputs = inputs = tuple([float(z) for z in inputs])
+            self._output = output = forward_pass(self.hidden_weights, self.output_weights, inputs, self._hidden)
+            return self.output_gain * output
+        stacked = np.empty((self.batch, len(inputs)))
+        for i, z in enumerate(inputs):
+            stacked[:, i] = z
+        self._inputs, self._output = stacked, np.empty(self.batch)
+        _forward_batch(self.hidden_weights, self.output_weights, stacked, self._hidden, self._output)
+        return self.output_gain * self._output
 
-    def _error_factors(self, u_fuzzy):
-        """Per hidden unit j: (dE/dWy[j], dE/dWz[j][i] / Z_i) of eqs. (8) and (9) at the last forward pass,
-        times any factor ``u_fuzzy`` carries (learn() passes alpha U_fuzzy: the steps of eqs. 6-7)."""
-        common = u_fuzzy * self.output_gain * (1.0 - self._output * self._output)
-        output_factors = self.layers.elementwise(lambda y: -0.5 * common * y, self._hidden)
-        hidden_factors = self.layers.elementwise(lambda wy, y: -0.25 * common * wy * (1.0 - y * y),
-                                                 self.output_weights, self._hidden)
-        return output_factors, hidden_factors
-
-    def gradients(self, u_fuzzy: float) -> tuple[list[float], list[list[float]]]:
+    def gradients(self, u_fuzzy: float) -> tuple[np.ndarray, np.ndarray]:
         """(dE/dWy, dE/dWz) of eqs. (8) and (9) at the last forward pass, error measured by u_fuzzy (one vehicle)."""
-        grad_output, hidden_factors = self._error_factors(u_fuzzy)
-        return grad_output, [[factor * z for z in self._inputs] for factor in hidden_factors]
+        output_factors, hidden_factors = np.empty(len(self._hidden)), np.empty(len(self._hidden))
+        error_factors(self.output_weights, self._hidden, self._output, float(u_fuzzy), self.output_gain,
+                      output_factors, hidden_factors)
+        return output_factors, np.outer(hidden_factors, self._inputs)
 
     def learn(self, u_fuzzy) -> None:
-        """One gradient step, eqs. (6) and (7), then projection of every weight onto its bounds.
-
-        Both steps use the weights of the last forward pass, as eqs. (6)-(7) say. A zero teaching
-        signal changes no weight (every gradient is proportional to it): one vehicle then skips the
-        arithmetic.
-        """
-        sigma = self.leakage
-        if self.learning_rate == 0.0 or (not is_batch(u_fuzzy) and u_fuzzy == 0.0
-                                         and (sigma == 0.0 or self.modification == 'e')):
-            return
-        output_steps, hidden_steps = self._error_factors(self.learning_rate * u_fuzzy)
-        leak = sigma * (abs(u_fuzzy) / self.output_gain if self.modification == 'e' else 1.0) if sigma > 0.0 else 0.0
-        layers, limit = self.layers, self.weight_limit
-        self.hidden_weights = layers.leaky_outer_step(self.hidden_weights, self._hidden_anchor, leak, hidden_steps,
-                                                      self._inputs, limit)
-        self.output_weights = layers.leaky_step(self.output_weights, self._output_anchor, leak, output_steps, limit)
+        """One gradient step, eqs. (6) and (7), then projection of every weight onto its bounds
+        (:func:`learning_step`; ``u_fuzzy`` a float, or one per vehicle of a batch)."""
+        step = learning_step if self.batch is None else _learning_batch
+        u_fuzzy = float(u_fuzzy) if self.batch is None else np.broadcast_to(np.asarray(u_fuzzy, dtype=float),
+                                                                             (self.batch,))
+        step(self.hidden_weights, self.output_weights, self._hidden_anchor, self._output_anchor, self._inputs,
+             self._hidden, self._output, u_fuzzy, self.learning_rate, self.output_gain, self.leakage,
+             self.modification == 'e', self.weight_limit)
