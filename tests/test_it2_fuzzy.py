@@ -165,3 +165,12 @@ def test_invalid_parameters_are_named(kwargs, name):
     arguments = dict(input_scale=1.0, output_gain=1.0) | kwargs
     with pytest.raises(ParameterError, match=name):
         IT2FuzzyCorrector(**arguments)
+
+
+@pytest.mark.parametrize('reducer', ['km', 'nie-tan'])
+def test_a_nan_surface_gives_nan_for_that_vehicle_only(reducer):
+    """The compiled kernel indexes the rule table by the segment: a NaN surface must not read outside it."""
+    fuzzy = IT2FuzzyCorrector(SCALE, output_gain=2.0, type_reducer=reducer)
+    assert math.isnan(fuzzy(math.nan))
+    values = fuzzy(np.array([0.1, math.nan, -0.1]))
+    assert math.isnan(values[1]) and values[0] == fuzzy(0.1) and values[2] == fuzzy(-0.1)

@@ -22,11 +22,18 @@ any input. The Karnik-Mendel type reduction then has an exact closed form: with 
 the switch points KM iterates to, and the defuzzified output is (y_l + y_r) / 2.
 The Nie-Tan reducer, y = sum((f_lo + f_up) y) / sum(f_lo + f_up), is available as an option.
 
-Every method takes S as a float (one vehicle) or as a numpy array (one element per vehicle).
+Every method takes S as a float (one vehicle) or as a numpy array (one element per vehicle). The
+arithmetic is written once, for one value of S, in compiled kernels (numba; :func:`corrective_term`
+is what a control step calls); an array runs them element by element.
 """
 from __future__ import annotations
 
-from quad_msgs_bridge.numeric import namespace_for
+import math
+
+import numpy as np
+from numba import njit
+
+from quad_msgs_bridge.numeric import is_batch
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 LABELS = ('NB', 'NM', 'ZE', 'PM', 'PB')
@@ -35,11 +42,100 @@ RULES = {'NB': 'PB', 'NM': 'PM', 'ZE': 'ZE', 'PM': 'NM', 'PB': 'NB'}  #: Table 2
 CONSEQUENTS = {'NB': -1.0, 'NM': -0.5, 'ZE': 0.0, 'PM': 0.5, 'PB': 1.0}
 TYPE_REDUCERS = ('km', 'nie-tan')
 
+#: the kinds of corrective term a kernel evaluates, the first entry of ``kernel_parameters``
+KM, NIE_TAN, SATURATION = 0.0, 1.0, 2.0
+#: positions in ``kernel_parameters``: kind, input_scale, 1 / input_scale, lower_height, 0.5 / lower_half_width,
+#: output_gain, 1.0 if the consequents decrease in label order, then the five consequents in label order
+_KIND, _SCALE, _INVERSE_SCALE, _LOWER_HEIGHT, _LOWER_SLOPE, _GAIN, _DECREASING, _FIRST_CONSEQUENT = range(8)
 
-class IT2FuzzyCorrector:
-    """u_fuzzy = output_gain * IT2FLS(S / input_scale); see the module docstring for the design."""
+
+@njit(cache=True, inline='always')
+def segment_of(inverse_scale, lower_height, lower_slope, s):
+    """(k, f_k_lo, f_k_up, f_k1_lo, f_k1_up, u) for surface S: labels k and k+1 fire (module docstring)."""
+    u = s * inverse_scale
+    u = -1.0 if u < -1.0 else 1.0 if u > 1.0 else u
+    position = (u + 1.0) * 2.0          # 0 .. 4, in units of label spacing
+    k = min(float(math.floor(position)), 3.0) if position == position else position   # NaN stays NaN
+    frac = position - k                   # 0 at centre k, 1 at centre k + 1
+    lower_k = lower_height * max(0.0, 1.0 - frac * lower_slope)
+    lower_k1 = lower_height * max(0.0, 1.0 - (1.0 - frac) * lower_slope)
+    return k, lower_k, 1.0 - frac, lower_k1, frac, u
+
+
+@njit(cache=True, inline='always')
+def _fired_consequents(parameters, k):
+    """The consequents of labels k and k + 1 (NaN for a NaN k)."""
+    if not 0.0 <= k <= 3.0:
+        return math.nan, math.nan
+    index = _FIRST_CONSEQUENT + int(k)
+    return parameters[index], parameters[index + 1]
+
+
+@njit(cache=True, inline='always')
+def type_reduced_interval(parameters, s):
+    """Exact KM type-reduced interval [y_l, y_r] of the normalised output for surface S.
+
+    Of the two firing rules, a has the smaller consequent and b the larger one."""
+    k, lower_k, upper_k, lower_k1, upper_k1, _ = segment_of(
+        parameters[_INVERSE_SCALE], parameters[_LOWER_HEIGHT], parameters[_LOWER_SLOPE], s)
+    y_k, y_k1 = _fired_consequents(parameters, k)
+    if parameters[_DECREASING] == 1.0:
+        y_a, lo_a, up_a, y_b, lo_b, up_b = y_k1, lower_k1, upper_k1, y_k, lower_k, upper_k
+    else:
+        y_a, lo_a, up_a, y_b, lo_b, up_b = y_k, lower_k, upper_k, y_k1, lower_k1, upper_k1
+    y_left = (up_a * y_a + lo_b * y_b) / (up_a + lo_b)
+    y_right = (lo_a * y_a + up_b * y_b) / (lo_a + up_b)
+    return y_left, y_right
+
+
+@njit(cache=True, inline='always')
+def corrective_term(parameters, s):
+    """The corrective control for surface S [units of the subsystem's control], of the kind
+    ``parameters[0]``: KM (IT2, KM type reduction), NIE_TAN (IT2, Nie-Tan) or SATURATION."""
+    kind, gain = parameters[_KIND], parameters[_GAIN]
+    if kind == SATURATION:
+        u = s / parameters[_SCALE]
+        return -gain * (-1.0 if u < -1.0 else 1.0 if u > 1.0 else u)
+    if kind == KM:
+        y_left, y_right = type_reduced_interval(parameters, s)
+        return gain * 0.5 * (y_left + y_right)
+    k, lower_k, upper_k, lower_k1, upper_k1, _ = segment_of(
+        parameters[_INVERSE_SCALE], parameters[_LOWER_HEIGHT], parameters[_LOWER_SLOPE], s)
+    y_k, y_k1 = _fired_consequents(parameters, k)
+    w_k, w_k1 = lower_k + upper_k, lower_k1 + upper_k1
+    return gain * (w_k * y_k + w_k1 * y_k1) / (w_k + w_k1)
+
+
+@njit(cache=True)
+def _corrective_batch(parameters, surfaces):
+    out = np.empty(surfaces.shape[0])
+    for b in range(surfaces.shape[0]):
+        out[b] = corrective_term(parameters, surfaces[b])
+    return out
+
+
+def _each(kernel, s, *arguments):
+    """``kernel(*arguments, S)`` (a tuple) for S a float; for an array of S, the tuple of the arrays of its
+    elements' results (outside a control step: diagnostics and tests)."""
+    if not is_batch(s):
+        return kernel(*arguments, float(s))
+    return tuple(np.array(column) for column in zip(*(kernel(*arguments, float(v)) for v in s)))
+
+
+class _Corrector:
+    """A corrective term evaluated by :func:`corrective_term` with its ``kernel_parameters``."""
 
     STATE = ()   #: stateless: a retune takes the new one whole
+
+    def __call__(self, s):
+        """Corrective control u for surface S (units of the subsystem's control)."""
+        if is_batch(s):
+            return _corrective_batch(self.kernel_parameters, np.asarray(s, dtype=float))
+        return corrective_term(self.kernel_parameters, float(s))
+
+
+class IT2FuzzyCorrector(_Corrector):
+    """u_fuzzy = output_gain * IT2FLS(S / input_scale); see the module docstring for the design."""
 
     def __init__(self, input_scale: float, output_gain: float, lower_height: float = 0.6,
                  lower_half_width: float = 0.35, type_reducer: str = 'km'):
@@ -51,15 +147,15 @@ class IT2FuzzyCorrector:
         if type_reducer not in TYPE_REDUCERS:
             raise ParameterError(f'type_reducer: {type_reducer!r} is not one of {", ".join(TYPE_REDUCERS)}')
         self.type_reducer = type_reducer
-        self._inverse_scale = 1.0 / self.input_scale
-        self._lower_slope = 0.5 / self.lower_half_width
         #: rule consequent of each antecedent label, in label order
         self.consequents = tuple(CONSEQUENTS[RULES[label]] for label in LABELS)
         steps = [b - a for a, b in zip(self.consequents, self.consequents[1:])]
         if not (all(step < 0.0 for step in steps) or all(step > 0.0 for step in steps)):
             raise ParameterError(f'rule consequents {self.consequents}: the closed-form KM reduction needs them '
                                  'strictly monotone in label order')
-        self._decreasing = steps[0] < 0.0   # Table 2: PB, PM, ZE, NM, NB for NB..PB
+        self.kernel_parameters = (KM if type_reducer == 'km' else NIE_TAN, self.input_scale, 1.0 / self.input_scale,
+                                  self.lower_height, 0.5 / self.lower_half_width, self.output_gain,
+                                  1.0 if steps[0] < 0.0 else 0.0, *self.consequents)   # Table 2: decreasing
 
     def segment(self, s):
         """Where S falls: (k, f_k_lo, f_k_up, f_k1_lo, f_k1_up, u) for labels k and k+1 of the segment.
@@ -67,14 +163,8 @@ class IT2FuzzyCorrector:
         k is a whole number (as a float, or a float array for a batch). Every label other than k
         and k+1 has firing interval [0, 0].
         """
-        xp = namespace_for(s)
-        u = xp.clip(s * self._inverse_scale, -1.0, 1.0)
-        position = (u + 1.0) * 2.0          # 0 .. 4, in units of label spacing
-        k = xp.minimum(xp.floor(position), 3.0)
-        frac = position - k                   # 0 at centre k, 1 at centre k + 1
-        lower_k = self.lower_height * xp.maximum(0.0, 1.0 - frac * self._lower_slope)
-        lower_k1 = self.lower_height * xp.maximum(0.0, 1.0 - (1.0 - frac) * self._lower_slope)
-        return k, lower_k, 1.0 - frac, lower_k1, frac, u
+        p = self.kernel_parameters
+        return _each(segment_of, s, p[_INVERSE_SCALE], p[_LOWER_HEIGHT], p[_LOWER_SLOPE])
 
     def firing_intervals(self, s: float) -> list[tuple[float, float]]:
         """(lower, upper) firing strength of every rule, in label order NB..PB (one vehicle)."""
@@ -86,42 +176,16 @@ class IT2FuzzyCorrector:
         return intervals
 
     def type_reduced(self, s):
-        """Exact KM type-reduced interval [y_l, y_r] of the normalised output for surface S.
-
-        Of the two firing rules, a has the smaller consequent and b the larger one.
-        """
-        xp = namespace_for(s)
-        k, lower_k, upper_k, lower_k1, upper_k1, _ = self.segment(s)
-        y_k, y_k1 = xp.take(self.consequents, k), xp.take(self.consequents, k + 1.0)
-        if self._decreasing:
-            y_a, lo_a, up_a, y_b, lo_b, up_b = y_k1, lower_k1, upper_k1, y_k, lower_k, upper_k
-        else:
-            y_a, lo_a, up_a, y_b, lo_b, up_b = y_k, lower_k, upper_k, y_k1, lower_k1, upper_k1
-        y_left = (up_a * y_a + lo_b * y_b) / (up_a + lo_b)
-        y_right = (lo_a * y_a + up_b * y_b) / (lo_a + up_b)
-        return y_left, y_right
-
-    def __call__(self, s):
-        """Corrective control u_fuzzy for surface S (units of the subsystem's control)."""
-        if self.type_reducer == 'km':
-            y_left, y_right = self.type_reduced(s)
-            return self.output_gain * 0.5 * (y_left + y_right)
-        xp = namespace_for(s)
-        k, lower_k, upper_k, lower_k1, upper_k1, _ = self.segment(s)
-        w_k, w_k1 = lower_k + upper_k, lower_k1 + upper_k1
-        return self.output_gain * (w_k * xp.take(self.consequents, k) + w_k1 * xp.take(self.consequents, k + 1.0)) \
-            / (w_k + w_k1)
+        """Exact KM type-reduced interval [y_l, y_r] of the normalised output for surface S."""
+        return _each(type_reduced_interval, s, self.kernel_parameters)
 
 
-class SaturationCorrector:
+class SaturationCorrector(_Corrector):
     """The linear saturation the IT2 term is compared with (ablation ``nnit2fsmc-sat``):
     u = -output_gain * sat(S / input_scale), sat(u) = clip(u, -1, 1)."""
-
-    STATE = ()
 
     def __init__(self, input_scale: float, output_gain: float):
         self.input_scale = check_number('input_scale', input_scale, 0.0, low_inclusive=False)
         self.output_gain = check_number('output_gain', output_gain, 0.0)
-
-    def __call__(self, s):
-        return -self.output_gain * namespace_for(s).clip(s / self.input_scale, -1.0, 1.0)
+        self.kernel_parameters = (SATURATION, self.input_scale, 0.0, 0.0, 0.0, self.output_gain, 0.0, 0.0, 0.0, 0.0,
+                                  0.0, 0.0)

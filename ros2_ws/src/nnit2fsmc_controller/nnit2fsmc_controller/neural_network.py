@@ -50,7 +50,7 @@ def bipolar_sigmoid(x: float) -> float:
     return math.tanh(0.5 * x)
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def forward_pass(hidden_weights, output_weights, inputs, hidden):
     """One vehicle: U_out = g(sum_j Wy[j] Y_j), with Y_j = g(sum_i Wz[j, i] Z_i) written into ``hidden``.
 
@@ -66,44 +66,61 @@ def forward_pass(hidden_weights, output_weights, inputs, hidden):
     return math.tanh(0.5 * total)
 
 
+@njit(cache=True, inline='always')
+def _common_factor(error, output_gain, output):
+    """error K_eq (1 - U_out^2): the factor every gradient of eqs. (8), (9) shares."""
+    return error * output_gain * (1.0 - output * output)
+
+
+@njit(cache=True, inline='always')
+def _unit_factors(common, output_weight, y):
+    """Hidden unit j's (dE/dWy[j], dE/dWz[j][i] / Z_i) of eqs. (8), (9), from the shared factor, Wy[j] and Y_j."""
+    return -0.5 * common * y, -0.25 * common * output_weight * (1.0 - y * y)
+
+
 @njit(cache=True)
 def error_factors(output_weights, hidden, output, error, output_gain, output_factors, hidden_factors):
     """One vehicle, at the forward pass (``hidden``, ``output``) for an error ``error`` of the estimate:
     dE/dWy[j] into ``output_factors`` and dE/dWz[j][i] / Z_i into ``hidden_factors`` (eqs. 8, 9)."""
-    common = error * output_gain * (1.0 - output * output)
+    common = _common_factor(error, output_gain, output)
     for j in range(hidden.shape[0]):
-        y = hidden[j]
-        output_factors[j] = -0.5 * common * y
-        hidden_factors[j] = -0.25 * common * output_weights[j] * (1.0 - y * y)
+        output_factors[j], hidden_factors[j] = _unit_factors(common, output_weights[j], hidden[j])
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
 def _clipped(value, limit):
     return -limit if value < -limit else limit if value > limit else value
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always')
+def _leaked(leak, weight, anchor):
+    """leak (W - W0); exactly 0 without leakage (W - W0 is finite), without reading the anchor."""
+    return leak * (weight - anchor) if leak != 0.0 else 0.0
+
+
+@njit(cache=True, inline='always')
 def learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, inputs, hidden, output, u_fuzzy,
                   learning_rate, output_gain, leakage, e_modification, limit):
     """One vehicle's gradient step, eqs. (6) and (7), with leakage and projection, in place.
 
     Both steps use the weights of the forward pass (``hidden``, ``output`` at ``inputs``), as eqs.
-    (6)-(7) say. A zero teaching signal changes no weight (every gradient is proportional to it), so
-    unless a sigma-modification leaks the arithmetic is skipped."""
+    (6)-(7) say: unit j's factors are taken before its output weight moves. A zero teaching signal
+    changes no weight (every gradient is proportional to it), so unless a sigma-modification leaks
+    the arithmetic is skipped."""
     if learning_rate == 0.0 or (u_fuzzy == 0.0 and (leakage == 0.0 or e_modification)):
         return
-    n_hidden, n_inputs = hidden_weights.shape
-    output_steps, hidden_steps = np.empty(n_hidden), np.empty(n_hidden)
-    error_factors(output_weights, hidden, output, learning_rate * u_fuzzy, output_gain, output_steps, hidden_steps)
+    common = _common_factor(learning_rate * u_fuzzy, output_gain, output)
     leak = 0.0
     if leakage > 0.0:
         leak = leakage * (abs(u_fuzzy) / output_gain if e_modification else 1.0)
+    n_hidden, n_inputs = hidden_weights.shape
     for j in range(n_hidden):
+        output_step, hidden_step = _unit_factors(common, output_weights[j], hidden[j])
         for i in range(n_inputs):
             w = hidden_weights[j, i]
-            hidden_weights[j, i] = _clipped(w - leak * (w - hidden_anchor[j, i]) - hidden_steps[j] * inputs[i], limit)
+            hidden_weights[j, i] = _clipped(w - _leaked(leak, w, hidden_anchor[j, i]) - hidden_step * inputs[i], limit)
         w = output_weights[j]
-        output_weights[j] = _clipped(w - leak * (w - output_anchor[j]) - output_steps[j], limit)
+        output_weights[j] = _clipped(w - _leaked(leak, w, output_anchor[j]) - output_step, limit)
 
 
 @njit(cache=True)
