@@ -1,6 +1,10 @@
 """The cascaded controller: eq. (10) as meant, input checks, rotor limits, building from the gains file."""
 import copy
+import json
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -317,3 +321,27 @@ def test_adapt_only_moves_the_learning_step():
     assert network_weights(eager) != network_weights(deferred)   # eager is one learning step ahead
     deferred.adapt()
     assert network_weights(eager) == network_weights(deferred)
+
+
+COMPILED_KERNELS = '''
+import json, sys
+sys.path[:0] = sys.argv[1:]
+from nnit2fsmc_controller.factory import compile_kernels, load_gains
+from nnit2fsmc_controller.it2_fuzzy import corrective_term
+from nnit2fsmc_controller.neural_network import forward_pass, learning_step
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
+kernels = (corrective_term, forward_pass, learning_step)
+before = [len(kernel.signatures) for kernel in kernels]
+compile_kernels('nnit2fsmc', load_vehicle_file()[0], load_gains())
+print(json.dumps([before, [len(kernel.signatures) for kernel in kernels]]))
+'''
+
+
+def test_compile_kernels_builds_every_kernel_of_a_single_vehicle_before_its_first_update():
+    """What the ROS controller node runs before subscribing: afterwards the first answer needs no compiling."""
+    root = Path(__file__).resolve().parent.parent
+    paths = [str(root / 'ros2_ws' / 'src' / package) for package in ('quad_msgs_bridge', 'nnit2fsmc_controller')]
+    result = subprocess.run([sys.executable, '-c', COMPILED_KERNELS, *paths], capture_output=True, text=True,
+                            timeout=300, check=True)
+    before, after = json.loads(result.stdout)
+    assert before == [0, 0, 0] and all(count >= 1 for count in after)

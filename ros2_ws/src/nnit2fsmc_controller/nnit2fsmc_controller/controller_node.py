@@ -40,8 +40,8 @@ from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.timebase import nanoseconds, seconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
-from .factory import (CONTROLLERS, build_controller, flatten_gains, gain_choices, gain_description, load_gains,
-                      unflatten_gains)
+from .factory import (CONTROLLERS, build_controller, compile_kernels, flatten_gains, gain_choices, gain_description,
+                      load_gains, unflatten_gains)
 from .tuning import restart_reason, retune
 from .trajectory import Waypoints
 
@@ -79,6 +79,7 @@ class ControllerNode(Node):
             self.controller = build_controller(kind, self.params, self.gains)
         except (ParameterError, ValueError) as error:
             raise ParameterError(f'controller gains: {error}') from error
+        compile_kernels(kind, self.params, self.gains)   # before subscribing: the first answer is not slower
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.forces_pub = publisher(self, kit, ROTOR_FORCES)
         self.wrench_pub = publisher(self, kit, CONTROL_WRENCH)
