@@ -93,12 +93,6 @@ def _clipped(value, limit):
 
 
 @njit(cache=True, inline='always')
-def _leaked(leak, weight, anchor):
-    """leak (W - W0); exactly 0 without leakage (W - W0 is finite), without reading the anchor."""
-    return leak * (weight - anchor) if leak != 0.0 else 0.0
-
-
-@njit(cache=True, inline='always')
 def learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, inputs, hidden, output, u_fuzzy,
                   learning_rate, output_gain, leakage, e_modification, limit):
     """One vehicle's gradient step, eqs. (6) and (7), with leakage and projection, in place.
@@ -118,9 +112,9 @@ def learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, 
         output_step, hidden_step = _unit_factors(common, output_weights[j], hidden[j])
         for i in range(n_inputs):
             w = hidden_weights[j, i]
-            hidden_weights[j, i] = _clipped(w - _leaked(leak, w, hidden_anchor[j, i]) - hidden_step * inputs[i], limit)
+            hidden_weights[j, i] = _clipped(w - leak * (w - hidden_anchor[j, i]) - hidden_step * inputs[i], limit)
         w = output_weights[j]
-        output_weights[j] = _clipped(w - _leaked(leak, w, output_anchor[j]) - output_step, limit)
+        output_weights[j] = _clipped(w - leak * (w - output_anchor[j]) - output_step, limit)
 
 
 @njit(cache=True)
