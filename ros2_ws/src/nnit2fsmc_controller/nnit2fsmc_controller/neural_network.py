@@ -25,9 +25,10 @@ so that, without persistent teaching, the weights relax back instead of drifting
 forms scale the leakage by the adaptation gain too; here it is a rate of its own, because the
 per-subsystem rates alpha span four decades and alpha sigma > 1 would make the leakage unstable.)
 
-Each equation is written once, for one vehicle, in the compiled kernels :func:`forward_pass`,
-:func:`error_factors` and :func:`learning_step` (numba: a network of a few dozen weights costs the
-interpreter far more than its arithmetic, and a control step runs six of them). A batch of B
+Each equation is written once, for one vehicle, in the compiled kernels :func:`forward_pass` and
+:func:`learning_step` (numba: a network of a few dozen weights costs the interpreter far more than
+its arithmetic, and a control step runs six of them); :meth:`EquivalentControlNetwork.gradients`
+reports the gradient factors the learning step uses, from the same helpers. A batch of B
 vehicles (one network per vehicle, each learning from its own fuzzy term) runs the same kernels
 vehicle after vehicle, in compiled loops: weights (B, H, I) and (B, H), one row per vehicle.
 """
@@ -76,15 +77,6 @@ def _common_factor(error, output_gain, output):
 def _unit_factors(common, output_weight, y):
     """Hidden unit j's (dE/dWy[j], dE/dWz[j][i] / Z_i) of eqs. (8), (9), from the shared factor, Wy[j] and Y_j."""
     return -0.5 * common * y, -0.25 * common * output_weight * (1.0 - y * y)
-
-
-@njit(cache=True)
-def error_factors(output_weights, hidden, output, error, output_gain, output_factors, hidden_factors):
-    """One vehicle, at the forward pass (``hidden``, ``output``) for an error ``error`` of the estimate:
-    dE/dWy[j] into ``output_factors`` and dE/dWz[j][i] / Z_i into ``hidden_factors`` (eqs. 8, 9)."""
-    common = _common_factor(error, output_gain, output)
-    for j in range(hidden.shape[0]):
-        output_factors[j], hidden_factors[j] = _unit_factors(common, output_weights[j], hidden[j])
 
 
 @njit(cache=True, inline='always')
@@ -184,9 +176,9 @@ class EquivalentControlNetwork:
 
     def gradients(self, u_fuzzy: float) -> tuple[np.ndarray, np.ndarray]:
         """(dE/dWy, dE/dWz) of eqs. (8) and (9) at the last forward pass, error measured by u_fuzzy (one vehicle)."""
-        output_factors, hidden_factors = np.empty(len(self._hidden)), np.empty(len(self._hidden))
-        error_factors(self.output_weights, self._hidden, self._output, float(u_fuzzy), self.output_gain,
-                      output_factors, hidden_factors)
+        common = _common_factor(float(u_fuzzy), self.output_gain, self._output)
+        output_factors, hidden_factors = np.array([_unit_factors(common, wy, y)
+                                                   for wy, y in zip(self.output_weights, self._hidden)]).T
         return output_factors, np.outer(hidden_factors, self._inputs)
 
     def learn(self, u_fuzzy) -> None:
