@@ -223,7 +223,7 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
             for sink in sinks:
                 sink.close()
     flight = (BagFlight(bag_shown, plan.controller, result.record, plan.params, plan.settle_time,
-                        dict(written.writer.custom_data)) if bag else None)
+                        dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
     return Flown(result.record, result.wall_time_s, flight, failure=result.failure)
 
 
@@ -252,7 +252,7 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
     flights = []
     for vehicle, result in zip(vehicles, results):
         flight = (BagFlight(bag_shown, vehicle.namespace, result.record, plan.params, plan.settle_time,
-                            dict(written.writer.custom_data)) if bag else None)
+                            dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
         flights.append((vehicle.namespace, Flown(result.record, result.wall_time_s, flight,
                                                  {'offset_m': list(vehicle.offset)}, failure=result.failure)))
     return flights

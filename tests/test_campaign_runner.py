@@ -151,6 +151,22 @@ def test_replay_flies_one_flight_on_the_embedded_path_with_its_row_s_metrics(ref
     assert status == (0 if all(rows[(3, c)]['finished'] for c in ('nnit2fsmc', 'pid')) else 1)
 
 
+def test_replay_reviews_a_flight_that_failed_before_settling(tmp_path):
+    """A flight failed at the first settled check (its record ends before two settled steps) is replayed with
+    its bag and review, tracking figures NaN as in its row, not refused as a flight too short to review."""
+    from flight_stack.campaign.replay import replay_flight
+    spec = parse_spec(DOCUMENT | {'controllers': ['nnit2fsmc'], 'flights': 1, 'max_error_m': 1e-6})
+    run_campaign(spec, tmp_path, RunOptions(workers=1, progress=False))
+    [row] = rows_by_key(tmp_path).values()
+    assert not row['finished'] and row['failure'] == 'position error above max_error'
+    assert math.isnan(row['rmse_position_m'])
+    assert replay_flight(spec, tmp_path, 0, RunOptions(progress=False)) == 1
+    target = tmp_path / 'replay-0' / 'nnit2fsmc'
+    assert json.loads((target / 'summary.json').read_text())['flight_ok'] is False
+    assert math.isnan(json.loads((target / 'review.json').read_text())[0]['rmse_position_m'])
+    assert (target / 'bag' / 'metadata.yaml').exists() and (target / 'report.html').exists()
+
+
 @pytest.mark.parametrize('args, message', [
     (['--flights', '0'], '--flights'), (['--workers', '0'], '--workers'), (['--batch-size', '-2'], '--batch-size'),
     (['--controllers', 'pid,lqr'], '--controllers'), (['--replay', '99'], '--replay')])

@@ -13,7 +13,8 @@ from pathlib import Path
 
 from quad_msgs_bridge.bag.flight_bag import FlightBag
 from quad_msgs_bridge.contract import GROUND_TRUTH, RECORDED_TOPICS
-from quad_msgs_bridge.review.command import review_bags
+from quad_msgs_bridge.review.command import review_flights
+from quad_msgs_bridge.review.flight_from_bag import BagFlight
 from quad_msgs_bridge.vehicle_params import ParameterError
 
 from ..embedded import fly_embedded
@@ -55,7 +56,10 @@ def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOp
                                 max_error=spec.max_error_m, failure=result.failure)
         summary['campaign'] = {'flight': flight, 'sampled': conditions.sampled_values(setup.nominal)}
         write_summary(summary, target)
-        review_bags([target / 'bag'], target)
+        # reviewed from the record in memory (what the bag holds), as a single flight is: it knows whether
+        # the flight ended early, so one that failed before settling is reviewed, not refused as too short
+        review_flights([BagFlight(target / 'bag', controller, result.record, setup.nominal, spec.settle_time,
+                                  dict(bag.writer.custom_data), ended_early=result.failure is not None)], target)
         outcome = 'finished' if result.failure is None else f'FAILED at {result.failure_time_s:.3f} s: {result.failure}'
         print(f'  {controller}: {outcome}; RMSE {summary["rmse_position_m"] * 100:.4f} cm; report {target / "report.html"}')
         row = rows.get((flight, controller))

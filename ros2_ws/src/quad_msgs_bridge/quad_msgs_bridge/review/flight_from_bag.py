@@ -44,11 +44,15 @@ class BagFlight:
     settle_time: float            #: [s]
     custom_data: dict             #: the bag's custom data (controller, scenario, disturbances, ...)
     warnings: list = field(default_factory=list)
+    #: the flight failed and ended there (known for a flight just flown): if that was before two settled
+    #: steps its tracking figures are NaN, as in its summary, rather than a too-short flight refused
+    ended_early: bool = False
 
     def metrics(self) -> dict:
         """The flight's metrics (:func:`~quad_msgs_bridge.review.metrics.flight_metrics`), as ``summary.json``."""
         return flight_metrics(self.record, self.settle_time, self.params.F_min, self.params.F_max,
-                              fuzzy_term=has_fuzzy_term(self.custom_data.get('controller')))
+                              fuzzy_term=has_fuzzy_term(self.custom_data.get('controller')),
+                              ended_early=self.ended_early)
 
 
 def _stamp_ns(msg) -> int:
