@@ -59,7 +59,10 @@ def _plots(rows: list[dict], controllers: list[str], plot_dir: Path) -> list[tup
     axes.set_ylabel('fraction of finished flights')
     axes.set_title('RMSE CDF per controller (finished flights)')
     axes.grid(True, which='both', alpha=0.3)
-    axes.legend()
+    if spread:
+        axes.legend()
+    else:
+        axes.text(0.5, 0.5, 'no finished flight', transform=axes.transAxes, ha='center', va='center')
     figure.tight_layout()
     figure.savefig(plot_dir / 'rmse_cdf.png', dpi=110)
     plt.close(figure)
