@@ -151,6 +151,22 @@ def test_replay_flies_one_flight_on_the_embedded_path_with_its_row_s_metrics(ref
     assert status == (0 if all(rows[(3, c)]['finished'] for c in ('nnit2fsmc', 'pid')) else 1)
 
 
+def test_a_second_campaign_writing_the_same_folder_is_refused_and_adds_no_row(reference_run, tmp_path):
+    """A --resume started while the first run still flies would append its flights a second time."""
+    from flight_stack.campaign.runner import LOCK_FILE, writing
+    before = (reference_run / 'flights.csv').read_text()
+    with writing(reference_run):
+        assert (reference_run / LOCK_FILE).read_text().strip() == str(os.getpid())
+        with pytest.raises(ParameterError, match=f'--out: another campaign is writing .*process {os.getpid()}'):
+            run_campaign(SPEC, reference_run, RunOptions(workers=1, resume=True, progress=False))
+    assert (reference_run / 'flights.csv').read_text() == before
+    assert not (reference_run / LOCK_FILE).exists()
+    fresh = tmp_path / 'fresh'
+    run_campaign(parse_spec(DOCUMENT | {'controllers': ['pid'], 'flights': 1}), fresh,
+                 RunOptions(workers=1, progress=False))   # held and released by the run itself
+    assert not (fresh / LOCK_FILE).exists() and len(read_flights(fresh / 'flights.csv')) == 1
+
+
 def test_replay_reviews_a_flight_that_failed_before_settling(tmp_path):
     """A flight failed at the first settled check (its record ends before two settled steps) is replayed with
     its bag and review, tracking figures NaN as in its row, not refused as a flight too short to review."""

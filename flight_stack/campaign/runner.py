@@ -9,6 +9,8 @@ loses no finished batch, and ``resume`` flies only the missing (flight, controll
 """
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import json
 import math
 import multiprocessing
@@ -29,6 +31,7 @@ from .results import FLIGHTS_FILE, SUMMARY_FILE, FlightsFile, read_flights, summ
 from .spec import CampaignSpec
 
 SPEC_FILE = 'spec.yaml'
+LOCK_FILE = '.campaign.lock'
 
 
 @dataclass(frozen=True)
@@ -89,6 +92,29 @@ def prepare_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> set:
         raise ParameterError(f'--out: {out_dir} is not writable')
     spec_path.write_text(yaml.safe_dump(document, sort_keys=False))
     return {(r['flight'], r['controller']) for r in read_flights(flights_path)}
+
+
+@contextlib.contextmanager
+def writing(out_dir: Path):
+    """Hold the output folder for one run (an exclusive lock on DIR/.campaign.lock, created with the
+    folder): a second campaign writing the same folder, such as a ``--resume`` while the first still
+    flies, would append the same flights twice; it is refused with ParameterError naming the holder."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / LOCK_FILE
+    with open(path, 'a+') as lock:
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            lock.seek(0)
+            raise ParameterError(f'--out: another campaign is writing {out_dir} (process {lock.read().strip()}); '
+                                 'let it finish, or stop it and continue with --resume') from None
+        lock.truncate(0)
+        lock.write(f'{os.getpid()}\n')
+        lock.flush()
+        try:
+            yield
+        finally:
+            path.unlink(missing_ok=True)   # still held: no other run took it in between
 
 
 def _ignore_sigint() -> None:
@@ -154,6 +180,11 @@ def run_campaign(spec: CampaignSpec, out_dir: Path, options: RunOptions) -> Camp
     workers = options.worker_count()
     # files, rates and every controller's gains valid before flying
     CampaignSetup.of(spec, options.vehicle_file, options.gains_file).check_controllers(spec.controllers)
+    with writing(out_dir):
+        return _fly_missing(spec, out_dir, options, workers)
+
+
+def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers: int) -> CampaignOutcome:
     done = prepare_output(spec, out_dir, options.resume)
     jobs = plan_jobs(spec, done, options, workers)
     total = sum(len(job.flights) for job in jobs)
