@@ -21,6 +21,7 @@ failed vehicle of a batch is frozen and never poisons the others; a single vehic
 """
 from __future__ import annotations
 
+import contextlib
 from dataclasses import dataclass
 from typing import Callable, NamedTuple, Sequence
 
@@ -101,6 +102,8 @@ class ClosedLoop:
         self.statistics = StatisticsAccumulator(rules.settle_time, params.F_min, params.F_max) if statistics else None
         batch = isinstance(simulator.state[0], np.ndarray)
         shape = simulator.state[0].shape if batch else ()
+        #: a batch's diverging vehicle may overflow before it is frozen; plain floats never warn
+        self._quiet = (lambda: np.errstate(over='ignore', invalid='ignore')) if batch else contextlib.nullcontext
         #: failure code per vehicle: -1 while flying, else an index into FAILURES
         self.failure = np.full(shape, -1) if batch else -1
         #: [s] sim time at which each vehicle failed (nan while flying)
@@ -119,7 +122,7 @@ class ClosedLoop:
         t = sim.time
         truth = sim.state
         measured = truth if self.sensor_noise is None else self.sensor_noise.measure(truth)
-        with np.errstate(over='ignore', invalid='ignore'):
+        with self._quiet():
             seen, observation = (measured, None) if self.observe is None else self.observe(t, measured)
         xp = namespace_for(seen[0])
         unreadable = xp.where(xp.finite_each(seen), False, True)
@@ -156,8 +159,9 @@ class ClosedLoop:
         height = xp.where(finite, state[Z], 0.0)
         code = xp.where((code < 0) & self.airborne & (height <= 0.0), 2, code)
         self.airborne = self.airborne | (height > AIRBORNE_HEIGHT)
-        with np.errstate(invalid='ignore', over='ignore'):
-            error = xp.sqrt(sum((p - r) * (p - r) for p, r in zip(state[:3], reference.position)))
+        (x, y, z), (x_ref, y_ref, z_ref) = state[:3], reference.position
+        with self._quiet():
+            error = xp.sqrt((x - x_ref) * (x - x_ref) + (y - y_ref) * (y - y_ref) + (z - z_ref) * (z - z_ref))
         if t >= self.rules.settle_time:
             code = xp.where((code < 0) & (error > self.rules.max_error), 3, code)
         code = xp.where((code < 0) & (error > ARENA_RADIUS), 4, code)

@@ -327,10 +327,10 @@ COMPILED_KERNELS = '''
 import json, sys
 sys.path[:0] = sys.argv[1:]
 from nnit2fsmc_controller.factory import compile_kernels, load_gains
-from nnit2fsmc_controller.it2_fuzzy import corrective_term
-from nnit2fsmc_controller.neural_network import forward_pass, learning_step
+from nnit2fsmc_controller.axis_laws import nnit2fsmc_step
+from nnit2fsmc_controller.neural_network import learning_step
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
-kernels = (corrective_term, forward_pass, learning_step)
+kernels = (nnit2fsmc_step, learning_step)
 before = [len(kernel.signatures) for kernel in kernels]
 compile_kernels('nnit2fsmc', load_vehicle_file()[0], load_gains())
 print(json.dumps([before, [len(kernel.signatures) for kernel in kernels]]))
@@ -344,4 +344,4 @@ def test_compile_kernels_builds_every_kernel_of_a_single_vehicle_before_its_firs
     result = subprocess.run([sys.executable, '-c', COMPILED_KERNELS, *paths], capture_output=True, text=True,
                             timeout=300, check=True)
     before, after = json.loads(result.stdout)
-    assert before == [0, 0, 0] and all(count >= 1 for count in after)
+    assert before == [0, 0] and all(count >= 1 for count in after)

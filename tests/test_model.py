@@ -147,7 +147,7 @@ def test_rk4_is_fourth_order():
 
 @pytest.mark.parametrize('params', [PARAMS, ASYMMETRIC], ids=['paper', 'asymmetric'])
 def test_batch_equals_scalar_runs(params):
-    """Numpy arrays of N vehicles give what N single-vehicle runs give (one copy of the physics)."""
+    """Numpy arrays of N vehicles give what N single-vehicle runs give, bit for bit (one kernel of the physics)."""
     rng = np.random.default_rng(11)
     n = 7
     states = [random_state(rng, airborne=i != 0) for i in range(n)]
@@ -165,7 +165,7 @@ def test_batch_equals_scalar_runs(params):
         singles = [model.step(t, s, f, DT) for s, f in zip(singles, forces)]
     assert all(isinstance(component, np.ndarray) for component in batch)
     for i, single in enumerate(singles):
-        np.testing.assert_allclose([component[i] for component in batch], single, rtol=1e-12, atol=1e-12)
+        assert [float(component[i]) for component in batch] == single
     assert singles[0][Z] == 0.0 and singles[1][Z] == 0.0    # ground contact is covered too
     assert all(s[Z] > 0.0 for s in singles[2:])
 
@@ -187,3 +187,15 @@ def test_simulator_refuses_non_finite_forces_and_keeps_the_last():
     assert all(map(math.isfinite, simulator.state))
     assert simulator.odometry().stamp == pytest.approx(0.01, abs=1e-15)
     assert simulator.state[X] == 0.0
+
+
+def test_a_batch_takes_floats_for_shared_values_and_refuses_a_wrong_length():
+    """Forces and air velocities may be one float shared by every vehicle; an array of another length is an error
+    (the compiled kernel never reads past a vehicle's arrays)."""
+    model = QuadrotorModel(PARAMS, DISTURBANCES)
+    batch = [np.full(3, v) for v in [0.0, 0.0, 2.0] + [0.0] * 9]
+    shared = model.step(0.5, batch, (1.2, 1.2, 1.2, 1.2), DT, (1.0, 0.0, 0.0))
+    single = model.step(0.5, [0.0, 0.0, 2.0] + [0.0] * 9, (1.2,) * 4, DT, (1.0, 0.0, 0.0))
+    assert all(list(component) == [value] * 3 for component, value in zip(shared, single))
+    with pytest.raises(ValueError):
+        model.step(0.5, batch, (np.ones(2),) * 4, DT)

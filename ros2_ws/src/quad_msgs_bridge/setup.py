@@ -15,7 +15,7 @@ setup(
         ('share/' + package_name + '/config', glob(package_name + '/config/*.yaml')),
     ],
     # the same as the root pyproject.toml's (pip install .); package.xml names them by rosdep key
-    install_requires=['setuptools', 'numpy>=1.26.4', 'PyYAML>=6.0', 'rosbags>=0.11.9,<0.12', 'mcap>=1.6.0,<2',
+    install_requires=['setuptools', 'numpy>=1.26.4', 'PyYAML>=6.0', 'numba>=0.68.1', 'rosbags>=0.11.9,<0.12', 'mcap>=1.6.0,<2',
                       'mcap-ros2-support>=0.6.0', 'zstandard>=0.25.0'],
     zip_safe=True,
     maintainer='NNIT2FSMC flight stack maintainers',

@@ -15,7 +15,7 @@ setup(
         ('share/' + package_name + '/config', glob(package_name + '/config/*.yaml')),
     ],
     # the same as the root pyproject.toml's for this package (pip install .); package.xml names them by rosdep key
-    install_requires=['setuptools', 'numpy>=1.26.4', 'PyYAML>=6.0'],
+    install_requires=['setuptools', 'numpy>=1.26.4', 'PyYAML>=6.0', 'numba>=0.68.1'],
     zip_safe=True,
     maintainer='NNIT2FSMC flight stack maintainers',
     maintainer_email='maintainers@nnit2fsmc.invalid',

@@ -24,11 +24,14 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+import numpy as np
+from numba import njit
+
 from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.vehicle_params import check_number
 
-from .it2_fuzzy import IT2FuzzyCorrector
-from .neural_network import EquivalentControlNetwork
+from .it2_fuzzy import IT2FuzzyCorrector, corrective_term, input_scale_of
+from .neural_network import EquivalentControlNetwork, forward_pass, learning_step
 
 
 class AxisOutput(NamedTuple):
@@ -38,6 +41,51 @@ class AxisOutput(NamedTuple):
     surface: float      #: sliding surface S = de + lambda e (the PID reports the same S)
     equivalent: float   #: NN estimate (NNIT2FSMC) or model equivalent control (SMC) or PID feedback term
     corrective: float   #: fuzzy term (NNIT2FSMC), switching term (SMC) or 0 (PID)
+
+
+@njit(cache=True, inline='always')
+def nnit2fsmc_step(hidden_weights, output_weights, hidden_anchor, output_anchor, hidden, previous_inputs,
+                   previous_output, pending, teaching, network, fuzzy, lam, e, de, inputs, learning):
+    """One vehicle's NNIT2FSMC update in one compiled call: the learning step (eqs. 6-9) still pending
+    from the last update (when ``pending``: the fuzzy term ``teaching``, at the last forward pass
+    ``previous_inputs``, ``hidden``, ``previous_output``), then S = de + lambda e (eq. 3, 11), the
+    corrective term U_fuzzy(S) and the network's U_eq_hat(Z) for ``inputs`` Z (writing ``hidden``).
+
+    ``network`` is EquivalentControlNetwork.kernel_constants, ``fuzzy`` the corrector's kernel_parameters.
+    Returns (v, S, U_eq_hat, U_fuzzy, the fuzzy term to learn from next, U_out): the network learns
+    only while |S| is inside the fuzzy universe and ``learning`` holds (NNIT2FSMCLaw)."""
+    learning_rate, output_gain, leakage, e_modification, limit = network
+    if pending:
+        learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, previous_inputs, hidden,
+                      previous_output, teaching, learning_rate, output_gain, leakage, e_modification, limit)
+    surface = de + lam * e
+    corrective = corrective_term(fuzzy, surface)
+    output = forward_pass(hidden_weights, output_weights, inputs, hidden)
+    equivalent = output_gain * output
+    to_learn = corrective if abs(surface) < input_scale_of(fuzzy) and learning else 0.0
+    return equivalent + corrective, surface, equivalent, corrective, to_learn, output
+
+
+@njit(cache=True)
+def _nnit2fsmc_batch(hidden_weights, output_weights, hidden_anchor, output_anchor, hidden, previous_inputs,
+                     previous_output, pending, teaching, network, fuzzy, lam, e, de, inputs, learning):
+    """:func:`nnit2fsmc_step` for every vehicle of a batch (weights (B, H, I), (B, H); one row each):
+    the rows (v, S, U_eq_hat, U_fuzzy, to learn) of a (5, B) array, and U_out (B,)."""
+    count = e.shape[0]
+    values, outputs = np.empty((5, count)), np.empty(count)
+    for b in range(count):
+        value, surface, equivalent, corrective, to_learn, output = nnit2fsmc_step(
+            hidden_weights[b], output_weights[b], hidden_anchor[b], output_anchor[b], hidden[b], previous_inputs[b],
+            previous_output[b], pending, teaching[b], network, fuzzy, lam, e[b], de[b], inputs[b], learning[b])
+        values[0, b], values[1, b], values[2, b], values[3, b], values[4, b] = (value, surface, equivalent,
+                                                                                 corrective, to_learn)
+        outputs[b] = output
+    return values, outputs
+
+
+def _per_vehicle(value, count: int) -> np.ndarray:
+    """A contiguous float array of ``count`` elements (a float is shared by every vehicle)."""
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=float), (count,)))
 
 
 class NNIT2FSMCLaw:
@@ -75,13 +123,29 @@ class NNIT2FSMCLaw:
         self.learning = True    #: False (per vehicle) holds the network: set by the controller each update
 
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
-        self.adapt()
-        xp = namespace_for(e)
-        surface = de + self.lam * e
-        corrective = self.fuzzy(surface)
-        equivalent = self.network.forward((1.0,) if self.bias_only else (ref_vel, ref_acc, 1.0))
-        self._teaching = xp.where((xp.abs(surface) < self.fuzzy.input_scale) & self.learning, corrective, 0.0)
-        return AxisOutput(equivalent + corrective, surface, equivalent, corrective)
+        """Takes the learning step still pending, then S, U_fuzzy(S) and U_eq_hat(Z) (:func:`nnit2fsmc_step`)."""
+        net = self.network
+        pending = self._teaching is not None
+        if net.batch is None:
+            inputs = (1.0,) if self.bias_only else (float(ref_vel), float(ref_acc), 1.0)
+            value, surface, equivalent, corrective, self._teaching, net._output = nnit2fsmc_step(
+                net.hidden_weights, net.output_weights, net._hidden_anchor, net._output_anchor, net._hidden,
+                net._inputs, net._output, pending, self._teaching if pending else 0.0, net.kernel_constants,
+                self.fuzzy.kernel_parameters, self.lam, float(e), float(de), inputs, bool(self.learning))
+            net._inputs = inputs
+            return AxisOutput(value, surface, equivalent, corrective)
+        count = net.batch
+        inputs = net.stacked_inputs((1.0,) if self.bias_only else (ref_vel, ref_acc, 1.0))
+        learning = np.empty(count, dtype=bool)
+        learning[:] = self.learning
+        teaching = self._teaching if pending else np.zeros(count)
+        values, net._output = _nnit2fsmc_batch(
+            net.hidden_weights, net.output_weights, net._hidden_anchor, net._output_anchor, net._hidden,
+            net._inputs, net._output, pending, _per_vehicle(teaching, count), net.kernel_constants,
+            self.fuzzy.kernel_parameters, self.lam, _per_vehicle(e, count), _per_vehicle(de, count), inputs, learning)
+        net._inputs = inputs
+        value, surface, equivalent, corrective, self._teaching = values
+        return AxisOutput(value, surface, equivalent, corrective)
 
     def adapt(self) -> None:
         """The network's learning step (eqs. 6-9) from the last update's fuzzy term, if not taken yet."""

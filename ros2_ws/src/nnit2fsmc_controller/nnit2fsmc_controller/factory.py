@@ -174,7 +174,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
 
 def compile_kernels(kind: str, params: VehicleParams, gains: Mapping[str, Any] | None = None) -> None:
     """Have numba build, or load from its cache, the compiled kernels a ``kind`` controller runs for one
-    vehicle: two updates of a throwaway controller hovering at 1 m (0.3 s from the cache; seconds the
+    vehicle: two updates and learning steps of a throwaway controller hovering at 1 m (0.3 s from the cache; seconds the
     first time after an install). A ROS controller node does this before it subscribes, so its first
     answer is as quick as the others (a lockstep simulator publishes an odometry again when the
     answer takes longer than its ``input_timeout``)."""
@@ -182,6 +182,7 @@ def compile_kernels(kind: str, params: VehicleParams, gains: Mapping[str, Any] |
     hover = [0.0, 0.0, 1.0] + [0.0] * 9
     for t in (0.0, controller.dt):
         controller.update(t, hover, hold((0.0, 0.0, 1.0)))
+        controller.adapt()     # as the node does after publishing
 
 
 def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt: float,

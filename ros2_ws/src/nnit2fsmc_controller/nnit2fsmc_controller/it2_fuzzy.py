@@ -50,6 +50,12 @@ _KIND, _SCALE, _INVERSE_SCALE, _LOWER_HEIGHT, _LOWER_SLOPE, _GAIN, _DECREASING, 
 
 
 @njit(cache=True, inline='always')
+def input_scale_of(parameters):
+    """The input scale [units of S] of a corrector's ``kernel_parameters``: |S| beyond it saturates the term."""
+    return parameters[_SCALE]
+
+
+@njit(cache=True, inline='always')
 def segment_of(inverse_scale, lower_height, lower_slope, s):
     """(k, f_k_lo, f_k_up, f_k1_lo, f_k1_up, u) for surface S: labels k and k+1 fire (module docstring)."""
     u = s * inverse_scale

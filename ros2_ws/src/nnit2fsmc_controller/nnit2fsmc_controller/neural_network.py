@@ -167,12 +167,23 @@ class EquivalentControlNetwork:
             self._inputs = inputs = tuple([float(z) for z in inputs])
             self._output = output = forward_pass(self.hidden_weights, self.output_weights, inputs, self._hidden)
             return self.output_gain * output
-        stacked = np.empty((self.batch, len(inputs)))
-        for i, z in enumerate(inputs):
-            stacked[:, i] = z
+        stacked = self.stacked_inputs(inputs)
         self._inputs, self._output = stacked, np.empty(self.batch)
         _forward_batch(self.hidden_weights, self.output_weights, stacked, self._hidden, self._output)
         return self.output_gain * self._output
+
+    def stacked_inputs(self, inputs: Sequence) -> np.ndarray:
+        """A batch's input vectors Z as a (B, I) array, one row per vehicle (a float input is shared by all)."""
+        stacked = np.empty((self.batch, len(inputs)))
+        for i, z in enumerate(inputs):
+            stacked[:, i] = z
+        return stacked
+
+    @property
+    def kernel_constants(self) -> tuple:
+        """(learning rate, K_eq, leakage, e-modification?, weight limit): the learning step's constants, in
+        :func:`learning_step`'s order."""
+        return (self.learning_rate, self.output_gain, self.leakage, self.modification == 'e', self.weight_limit)
 
     def gradients(self, u_fuzzy: float) -> tuple[np.ndarray, np.ndarray]:
         """(dE/dWy, dE/dWz) of eqs. (8) and (9) at the last forward pass, error measured by u_fuzzy (one vehicle)."""
@@ -188,5 +199,4 @@ class EquivalentControlNetwork:
         u_fuzzy = float(u_fuzzy) if self.batch is None else np.broadcast_to(np.asarray(u_fuzzy, dtype=float),
                                                                              (self.batch,))
         step(self.hidden_weights, self.output_weights, self._hidden_anchor, self._output_anchor, self._inputs,
-             self._hidden, self._output, u_fuzzy, self.learning_rate, self.output_gain, self.leakage,
-             self.modification == 'e', self.weight_limit)
+             self._hidden, self._output, u_fuzzy, *self.kernel_constants)

@@ -13,6 +13,9 @@ import bisect
 import math
 from typing import NamedTuple, Sequence
 
+import numpy as np
+from numba import njit
+
 Vec3 = tuple[float, float, float]
 
 
@@ -52,16 +55,26 @@ def _quintic_coefficients(p0, v0, a0, p1, v1, a1, h) -> tuple:
             6.0 * dp - 3.0 * hv0 - 3.0 * hv1 - 0.5 * h2a0 + 0.5 * h2a1, h)
 
 
-def _quintic(coefficients: tuple, s: float) -> tuple:
+@njit(cache=True, inline='always')
+def _quintic(coefficients, s):
     """Value and first four time derivatives at s of the interpolant of :func:`_quintic_coefficients`
     (Horner's scheme; each s-derivative is divided by h per order)."""
-    c0, c1, c2, c3, c4, c5, h = coefficients
+    c0, c1, c2, c3, c4, c5, h = (coefficients[0], coefficients[1], coefficients[2], coefficients[3], coefficients[4],
+                                 coefficients[5], coefficients[6])
     value = c0 + s * (c1 + s * (c2 + s * (c3 + s * (c4 + s * c5))))
     rate = (c1 + s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))) / h
     acceleration = (2.0 * c2 + s * (6.0 * c3 + s * (12.0 * c4 + s * 20.0 * c5))) / (h * h)
     jerk = (6.0 * c3 + s * (24.0 * c4 + s * 60.0 * c5)) / (h * h * h)
     snap = (24.0 * c4 + s * 120.0 * c5) / (h * h * h * h)
     return value, rate, acceleration, jerk, snap
+
+
+@njit(cache=True)
+def _quintic_channels(coefficients, s):
+    """:func:`_quintic` of each channel x, y, z, yaw (the rows of ``coefficients``) at s, in one compiled
+    call: a controller samples its path every control step."""
+    return (_quintic(coefficients[0], s), _quintic(coefficients[1], s), _quintic(coefficients[2], s),
+            _quintic(coefficients[3], s))
 
 
 class SetpointPath:
@@ -115,17 +128,14 @@ class SetpointPath:
         if i != self._segment:
             self._segment, self._coefficients = i, self._segment_coefficients(i)
         s = (t - times[i]) / (times[i + 1] - times[i])
-        cx, cy, cz, cyaw = self._coefficients
-        x, vx, ax, jx, sx = _quintic(cx, s)
-        y, vy, ay, jy, sy = _quintic(cy, s)
-        z, vz, az, jz, sz = _quintic(cz, s)
-        yaw, yaw_rate, yaw_acc, _, _ = _quintic(cyaw, s)
+        (x, vx, ax, jx, sx), (y, vy, ay, jy, sy), (z, vz, az, jz, sz), (yaw, yaw_rate, yaw_acc, _, _) = \
+            _quintic_channels(self._coefficients, s)
         return ReferenceSample(position=(x, y, z), velocity=(vx, vy, vz), acceleration=(ax, ay, az),
                                yaw=_wrap(yaw), yaw_rate=yaw_rate, yaw_acceleration=yaw_acc,
                                jerk=(jx, jy, jz), snap=(sx, sy, sz))
 
-    def _segment_coefficients(self, i: int) -> tuple:
-        """Per channel x, y, z, yaw: the interpolant's coefficients between points i and i + 1
+    def _segment_coefficients(self, i: int) -> np.ndarray:
+        """One row per channel x, y, z, yaw: the interpolant's coefficients between points i and i + 1
         (:func:`_quintic_coefficients`); the yaw takes the short way round."""
         a, b = self.points[i], self.points[i + 1]
         h = self.times[i + 1] - self.times[i]
@@ -133,4 +143,4 @@ class SetpointPath:
                                            b.position[k], b.velocity[k], b.acceleration[k], h) for k in range(3))
         yaw = _quintic_coefficients(a.yaw, a.yaw_rate, a.yaw_acceleration, a.yaw + _wrap(b.yaw - a.yaw),
                                     b.yaw_rate, b.yaw_acceleration, h)
-        return (*axes, yaw)
+        return np.array((*axes, yaw))

@@ -83,9 +83,10 @@ class SimNode(Node):
                                  f'odometry_rate {odometry_rate} Hz')
         self.substeps = int(round(substeps))
         namespaces = vehicle_namespaces(self.get_namespace(), names)
+        model = QuadrotorModel(params, disturbances)
+        model.compile_kernels()   # before publishing: the first step is not slower than the others
         try:
-            self.fleet = Fleet(QuadrotorModel(params, disturbances), 1.0 / physics_rate,
-                               split_initial_states(start, len(namespaces)))
+            self.fleet = Fleet(model, 1.0 / physics_rate, split_initial_states(start, len(namespaces)))
         except ParameterError:
             raise
         except ValueError as error:
