@@ -145,3 +145,37 @@ def test_wrap_angle(angle):
     assert -math.pi <= wrapped < math.pi
     assert math.cos(wrapped) == pytest.approx(math.cos(angle), abs=1e-13)
     assert math.sin(wrapped) == pytest.approx(math.sin(angle), abs=1e-13)
+
+
+def test_a_batch_of_odometry_conversions_equals_the_single_vehicle_ones_bit_for_bit():
+    """One compiled kernel per conversion serves floats and arrays: vehicle k of a batch gets exactly the
+    numbers it gets alone, and a bad vehicle (no orientation, gimbal lock) gets NaN without touching the others."""
+    rng = np.random.default_rng(7)
+    states = [[*rng.normal(size=6), *attitude, *rng.uniform(-2, 2, 3)] for attitude in ATTITUDES[:6]]
+    batch = [np.array(column) for column in zip(*states)]
+    odometry = odometry_from_state(1.5, batch)
+    back = state_from_odometry(odometry)
+    for k, state in enumerate(states):
+        single = odometry_from_state(1.5, state)
+        assert [float(v[k]) for field in odometry[1:] for v in field] == [v for field in single[1:] for v in field]
+        assert [float(v[k]) for v in back] == state_from_odometry(single)
+    orientation = [np.array(c) for c in odometry.orientation]
+    for c in orientation:
+        c[1] = 0.0                                                   # vehicle 1: no orientation
+    pitched_up = (0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5))           # pitch exactly pi/2
+    locked = odometry_from_state(1.5, [*[np.zeros(2)] * 9, *[np.ones(2)] * 3])
+    locked = locked._replace(orientation=tuple(np.array([level, up]) for level, up in zip((0.0, 0.0, 0.0, 1.0),
+                                                                                            pitched_up)))
+    bad = state_from_odometry(odometry._replace(orientation=tuple(orientation)))
+    assert all(np.isnan(v[1]) for v in bad[3:]) and all(np.isfinite(v[[0, 2, 3, 4, 5]]).all() for v in bad)
+    dphi, dtheta, dpsi = state_from_odometry(locked)[9:]     # vehicle 1 at gimbal lock: no roll and yaw rates
+    assert np.isfinite([dphi[0], dtheta[0], dpsi[0], dtheta[1]]).all() and np.isnan([dphi[1], dpsi[1]]).all()
+
+
+@pytest.mark.parametrize('orientation, message', [((0.0, 0.0, 0.0, 0.0), 'no orientation'),
+                                                  ((math.nan, 0.0, 0.0, 1.0), 'no orientation'),
+                                                  ((0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5)), 'gimbal lock')])
+def test_a_single_bad_odometry_is_refused_with_the_reason(orientation, message):
+    sample = odometry_from_state(0.0, [0.0] * 12)._replace(orientation=orientation, angular_velocity=(0.1, 0.2, 0.3))
+    with pytest.raises(ValueError, match=message):
+        state_from_odometry(sample)

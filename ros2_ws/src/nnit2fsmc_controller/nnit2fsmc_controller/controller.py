@@ -55,8 +55,11 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Sequence
 
+import numpy as np
+from numba import njit
+
 from quad_msgs_bridge.frames import wrap_angle
-from quad_msgs_bridge.numeric import namespace_for
+from quad_msgs_bridge.numeric import namespace_for, select
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, controls_from_forces
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
@@ -139,13 +142,63 @@ class TiltLimit:
         self.height = check_number('low_altitude_height', low_altitude_height, 0.0)
         self.high_tangent = math.tan(max_tilt)
         self.low_tangent = math.tan(min(low, max_tilt))
-        self.constant = self.height == 0.0 or self.low_tangent == self.high_tangent
+        constant = self.height == 0.0 or self.low_tangent == self.high_tangent
+        #: (tan of the limit above the height, tan below it, the height [m]) as :func:`tilt_tangent` takes them
+        self.kernel_parameters = (self.high_tangent, self.high_tangent if constant else self.low_tangent, self.height)
 
     def tangent(self, z):
         """tan(limit) at height z [m] (a float, or one per vehicle of a batch)."""
-        if self.constant:
-            return self.high_tangent
-        return namespace_for(z).where(z < self.height, self.low_tangent, self.high_tangent)
+        return tilt_tangent(self.kernel_parameters, z)
+
+
+@njit(cache=True, inline='always')
+def tilt_tangent(limit, z):
+    """tan of the tilt limit at height z [m] (TiltLimit.kernel_parameters ``limit``)."""
+    return select(z < limit[2], limit[1], limit[0])
+
+
+@njit(cache=True, inline='always', error_model='numpy')
+def _tilt_scale(ax, ay, z, g, limit):
+    """Factor (<= 1) that brings the horizontal acceleration (ax, ay) [m/s^2] within the tilt limit at height z [m]."""
+    bound = g * tilt_tangent(limit, z)
+    return bound / np.maximum(np.hypot(ax, ay), bound)
+
+
+@njit(cache=True, error_model='numpy')
+def attitude_of_accelerations(ax, ay, psi, z, g, limit):
+    """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi,
+    the acceleration first scaled down to the tilt limit at height z [m] (:class:`TiltLimit`), direction kept."""
+    scale = _tilt_scale(ax, ay, z, g, limit)
+    ax, ay = ax * scale, ay * scale
+    cpsi, spsi = np.cos(psi), np.sin(psi)
+    theta_d = np.arctan2(ax * cpsi + ay * spsi, g)
+    phi_d = np.arctan((ax * spsi - ay * cpsi) * np.cos(theta_d) / g)
+    return phi_d, theta_d
+
+
+@njit(cache=True, error_model='numpy')
+def flat_attitude_of(ax, ay, jx, jy, sx, sy, psi, dpsi, ddpsi, z, g, limit):
+    """(phi_d, dphi_d, ddphi_d, theta_d, dtheta_d, ddtheta_d): :meth:`CascadedController.flat_attitude`."""
+    scale = _tilt_scale(ax, ay, z, g, limit)
+    ax, ay = ax * scale, ay * scale
+    jx, jy, sx, sy = jx * scale, jy * scale, sx * scale, sy * scale
+    c, s = np.cos(psi), np.sin(psi)
+    a_, b_ = ax * c + ay * s, ax * s - ay * c
+    ja, jb = jx * c + jy * s, jx * s - jy * c
+    sa, sb = sx * c + sy * s, sx * s - sy * c
+    da, db = ja - dpsi * b_, jb + dpsi * a_
+    dda = sa - 2.0 * dpsi * jb - ddpsi * b_ - dpsi * dpsi * a_
+    ddb = sb + 2.0 * dpsi * ja + ddpsi * a_ - dpsi * dpsi * b_
+    q = g * g + a_ * a_
+    theta = np.arctan2(a_, g)
+    dtheta = g * da / q
+    ddtheta = g * dda / q - 2.0 * g * a_ * da * da / (q * q)
+    ct, st = np.cos(theta), np.sin(theta)
+    cc = b_ * ct / g
+    dc = (db * ct - b_ * st * dtheta) / g
+    ddc = (ddb * ct - 2.0 * db * st * dtheta - b_ * ct * dtheta * dtheta - b_ * st * ddtheta) / g
+    r = 1.0 + cc * cc
+    return np.arctan(cc), dc / r, ddc / r - 2.0 * cc * dc * dc / (r * r), theta, dtheta, ddtheta
 
 
 class CascadedController:
@@ -269,12 +322,6 @@ class CascadedController:
         """The sliding-surface slopes lambda [1/s] of the subsystems, in AXES order (``control/diagnostics``)."""
         return tuple(self.laws[axis].lam for axis in AXES)
 
-    def _tilt_scale(self, ax, ay, z):
-        """Factor (<= 1) that brings the horizontal acceleration (ax, ay) [m/s^2] within the tilt limit at height z [m]."""
-        limit = self.params.g * self.tilt_limit.tangent(z)
-        xp = namespace_for(ax, ay, limit)
-        return limit / xp.maximum(xp.hypot(ax, ay), limit)
-
     def flat_attitude(self, ax, ay, jerk, snap, psi, dpsi, ddpsi, z):
         """(phi_d, dphi_d, ddphi_d, theta_d, dtheta_d, ddtheta_d) [rad, rad/s, rad/s^2]: eq. (10) at
         (ax, ay) [m/s^2] and yaw psi [rad] (:meth:`attitude_from_accelerations`, the same arithmetic)
@@ -290,40 +337,13 @@ class CascadedController:
           C' = (B' cos - B sin theta') / g,  C'' = (B'' cos - 2 B' sin theta' - B cos theta'^2 - B sin theta'') / g
           phi' = C' / (1 + C^2),  phi'' = C'' / (1 + C^2) - 2 C C'^2 / (1 + C^2)^2
         """
-        xp = namespace_for(ax, ay, psi)
-        scale = self._tilt_scale(ax, ay, z)
-        ax, ay = ax * scale, ay * scale
         (jx, jy), (sx, sy) = jerk, snap
-        jx, jy, sx, sy = jx * scale, jy * scale, sx * scale, sy * scale
-        g = self.params.g
-        c, s = xp.cos(psi), xp.sin(psi)
-        a_, b_ = ax * c + ay * s, ax * s - ay * c
-        ja, jb = jx * c + jy * s, jx * s - jy * c
-        sa, sb = sx * c + sy * s, sx * s - sy * c
-        da, db = ja - dpsi * b_, jb + dpsi * a_
-        dda = sa - 2.0 * dpsi * jb - ddpsi * b_ - dpsi * dpsi * a_
-        ddb = sb + 2.0 * dpsi * ja + ddpsi * a_ - dpsi * dpsi * b_
-        q = g * g + a_ * a_
-        theta = xp.atan2(a_, g)
-        dtheta = g * da / q
-        ddtheta = g * dda / q - 2.0 * g * a_ * da * da / (q * q)
-        ct, st = xp.cos(theta), xp.sin(theta)
-        cc = b_ * ct / g
-        dc = (db * ct - b_ * st * dtheta) / g
-        ddc = (ddb * ct - 2.0 * db * st * dtheta - b_ * ct * dtheta * dtheta - b_ * st * ddtheta) / g
-        r = 1.0 + cc * cc
-        return xp.atan(cc), dc / r, ddc / r - 2.0 * cc * dc * dc / (r * r), theta, dtheta, ddtheta
+        return flat_attitude_of(ax, ay, jx, jy, sx, sy, psi, dpsi, ddpsi, z, self.params.g,
+                                self.tilt_limit.kernel_parameters)
 
     def attitude_from_accelerations(self, ax, ay, psi, z):
         """Eq. (10) as meant: (phi_d, theta_d) [rad] realising horizontal accelerations [m/s^2, world] at yaw psi.
 
         Beyond the tilt limit at height z [m, world] the acceleration is scaled down to it, its direction kept.
         """
-        xp = namespace_for(psi)
-        scale = self._tilt_scale(ax, ay, z)
-        ax, ay = ax * scale, ay * scale
-        g = self.params.g
-        cpsi, spsi = xp.cos(psi), xp.sin(psi)
-        theta_d = xp.atan2(ax * cpsi + ay * spsi, g)
-        phi_d = xp.atan((ax * spsi - ay * cpsi) * xp.cos(theta_d) / g)
-        return phi_d, theta_d
+        return attitude_of_accelerations(ax, ay, psi, z, self.params.g, self.tilt_limit.kernel_parameters)

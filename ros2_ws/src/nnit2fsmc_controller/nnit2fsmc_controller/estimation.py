@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import math
 
+from numba import njit
+
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.vehicle_params import check_number
 
 #: (filtered component, its rate) in the controller's 12-state x y z vx vy vz phi theta psi dphi dtheta dpsi
 PAIRS = ((0, 3), (1, 4), (2, 5), (6, 9), (7, 10), (8, 11))
-YAW = 8
 
 
 def first_order_blend(dt: float, frequency_hz: float, key: str) -> tuple[float, float]:
@@ -44,27 +45,39 @@ class ComplementaryFilter:
         self._rates = None
 
     def __call__(self, state) -> list:
-        state = list(state)
-        rates = [state[rate] for _, rate in PAIRS]
+        state = tuple(state)
         if self._estimate is None:
-            estimate = [state[q] for q, _ in PAIRS]
-        else:
-            estimate = []
-            for (q, _), previous, old_rate, rate in zip(PAIRS, self._estimate, self._rates, rates):
-                predicted = previous + 0.5 * self.dt * (old_rate + rate)
-                innovation = state[q] - predicted
-                if q == YAW:
-                    innovation = wrap_angle(innovation)
-                estimate.append(predicted + self.blend * innovation)
-            estimate[-1] = wrap_angle(estimate[-1])
-        self._estimate, self._rates = estimate, rates
-        for (q, _), value in zip(PAIRS, estimate):
-            state[q] = value
-        return state
+            self._estimate, self._rates = tuple(state[q] for q, _ in PAIRS), tuple(state[rate] for _, rate in PAIRS)
+            return list(state)
+        filtered, self._estimate, self._rates = _complementary_step(state, self._estimate, self._rates, self.dt,
+                                                                    self.blend)
+        return list(filtered)
 
 
-#: the measured world velocities vx, vy, vz [m/s] in the controller's 12-state
-VELOCITIES = (3, 4, 5)
+@njit(cache=True, inline='always')
+def _blended(measured, previous, old_rate, rate, dt, blend, wrapped):
+    """One filtered component: the estimate predicted by the trapezoid of the rates, corrected by ``blend``
+    of the innovation (wrapped to [-pi, pi) for the yaw, and so is its estimate)."""
+    predicted = previous + 0.5 * dt * (old_rate + rate)
+    innovation = measured - predicted
+    if wrapped:
+        return wrap_angle(predicted + blend * wrap_angle(innovation))
+    return predicted + blend * innovation
+
+
+@njit(cache=True, error_model='numpy')
+def _complementary_step(state, estimate, old_rates, dt, blend):
+    """(filtered 12-state, new estimate of x y z phi theta psi, their rates) after one sample (floats, or
+    arrays for a batch): the module docstring's filter."""
+    rates = (state[3], state[4], state[5], state[9], state[10], state[11])
+    x = _blended(state[0], estimate[0], old_rates[0], rates[0], dt, blend, False)
+    y = _blended(state[1], estimate[1], old_rates[1], rates[1], dt, blend, False)
+    z = _blended(state[2], estimate[2], old_rates[2], rates[2], dt, blend, False)
+    phi = _blended(state[6], estimate[3], old_rates[3], rates[3], dt, blend, False)
+    theta = _blended(state[7], estimate[4], old_rates[4], rates[4], dt, blend, False)
+    psi = _blended(state[8], estimate[5], old_rates[5], rates[5], dt, blend, True)
+    filtered = (x, y, z, state[3], state[4], state[5], phi, theta, psi, state[9], state[10], state[11])
+    return filtered, (x, y, z, phi, theta, psi), rates
 
 
 class VelocityFilter:
@@ -89,13 +102,19 @@ class VelocityFilter:
         self._velocity = None
 
     def __call__(self, state) -> list:
-        state = list(state)
-        measured = [state[i] for i in VELOCITIES]
+        state = tuple(state)
         if self._velocity is None:
-            velocity = measured
-        else:
-            velocity = [old + self.blend * (new - old) for old, new in zip(self._velocity, measured)]
-        self._velocity = velocity
-        for i, value in zip(VELOCITIES, velocity):
-            state[i] = value
-        return state
+            self._velocity = state[3:6]
+            return list(state)
+        filtered = _velocity_step(state, self._velocity, self.blend)
+        self._velocity = filtered[3:6]
+        return list(filtered)
+
+
+@njit(cache=True, error_model='numpy')
+def _velocity_step(state, velocity, blend):
+    """The 12-state with vx, vy, vz low-passed from the last estimate ``velocity`` (floats, or arrays for a batch)."""
+    vx = velocity[0] + blend * (state[3] - velocity[0])
+    vy = velocity[1] + blend * (state[4] - velocity[1])
+    vz = velocity[2] + blend * (state[5] - velocity[2])
+    return (state[0], state[1], state[2], vx, vy, vz, state[6], state[7], state[8], state[9], state[10], state[11])

@@ -3,80 +3,152 @@
 Convention (REP 103): world frame ``odom`` is ENU, body frame ``base_link`` is FLU. The attitude
 is the Z-Y-X Euler sequence of the paper's eq. (1): body-to-world R = Rz(psi) Ry(theta) Rx(phi),
 whose third column is the thrust direction used in eq. (1). Quaternions are (x, y, z, w), the
-order of ``geometry_msgs/Quaternion``. All functions take and return plain floats; the two rate
-conversions also take numpy arrays (one element per vehicle) through :mod:`quad_msgs_bridge.numeric`.
+order of ``geometry_msgs/Quaternion``.
+
+Each conversion is written once, as a compiled kernel (numba; the ``_``-prefixed functions) that
+takes floats (one vehicle) or numpy arrays (one element per vehicle) alike, so that the odometry
+conversions of :mod:`quad_msgs_bridge.state` run as one compiled call per message. The public
+functions take any sequences and add the single-vehicle checks: a quaternion without orientation
+and gimbal lock raise ValueError for one vehicle; in a batch such a vehicle's values become NaN
+(the others are unaffected).
 """
 from __future__ import annotations
 
 import math
 
-from quad_msgs_bridge.numeric import SCALAR, namespace_for
+import numpy as np
+from numba import njit
+
+from quad_msgs_bridge.numeric import is_batch, select
 
 Vec3 = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
 
+#: |cos(theta)| below which the Euler rates are undefined (gimbal lock)
+GIMBAL_LOCK_COSINE = 1e-9
 
-def quaternion_from_euler(phi: float, theta: float, psi: float) -> Quat:
-    """Unit quaternion (x, y, z, w) of R = Rz(psi) Ry(theta) Rx(phi); angles [rad]."""
-    xp = namespace_for(phi, theta, psi)
-    cr, sr = xp.cos(phi / 2.0), xp.sin(phi / 2.0)
-    cp, sp = xp.cos(theta / 2.0), xp.sin(theta / 2.0)
-    cy, sy = xp.cos(psi / 2.0), xp.sin(psi / 2.0)
+
+@njit(cache=True, inline='always', error_model='numpy')
+def _quaternion(phi, theta, psi):
+    cr, sr = np.cos(phi / 2.0), np.sin(phi / 2.0)
+    cp, sp = np.cos(theta / 2.0), np.sin(theta / 2.0)
+    cy, sy = np.cos(psi / 2.0), np.sin(psi / 2.0)
     return (sr * cp * cy - cr * sp * sy,
             cr * sp * cy + sr * cp * sy,
             cr * cp * sy - sr * sp * cy,
             cr * cp * cy + sr * sp * sy)
 
 
-def euler_from_quaternion(q: Quat) -> Vec3:
-    """(phi, theta, psi) [rad] of a quaternion (x, y, z, w); normalised first, theta in [-pi/2, pi/2]."""
-    x, y, z, w = q
-    xp = namespace_for(x, y, z, w)
-    norm = xp.sqrt(x * x + y * y + z * z + w * w)
-    if xp is SCALAR and (not norm > 0.0 or not math.isfinite(norm)):
-        raise ValueError(f'quaternion {q} has no orientation (norm {norm})')   # a batch gets NaN there
+@njit(cache=True, inline='always', error_model='numpy')
+def _euler(x, y, z, w):
+    """(phi, theta, psi, norm of the quaternion): the angles NaN where the norm is 0 or not finite."""
+    norm = np.sqrt(x * x + y * y + z * z + w * w)
     x, y, z, w = x / norm, y / norm, z / norm, w / norm
-    phi = xp.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-    theta = xp.asin(xp.clip(2.0 * (w * y - z * x), -1.0, 1.0))
-    psi = xp.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return phi, theta, psi
+    phi = np.arctan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    theta = np.arcsin(np.minimum(np.maximum(2.0 * (w * y - z * x), -1.0), 1.0))
+    psi = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return phi, theta, psi, norm
 
 
-def rotation_from_euler(phi: float, theta: float, psi: float) -> tuple[Vec3, Vec3, Vec3]:
-    """Rows of the body-to-world rotation matrix R = Rz(psi) Ry(theta) Rx(phi)."""
-    xp = namespace_for(phi, theta, psi)
-    cf, sf = xp.cos(phi), xp.sin(phi)
-    ct, st = xp.cos(theta), xp.sin(theta)
-    cs, ss = xp.cos(psi), xp.sin(psi)
+@njit(cache=True, inline='always', error_model='numpy')
+def _rotation(phi, theta, psi):
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    cs, ss = np.cos(psi), np.sin(psi)
     return ((ct * cs, sf * st * cs - cf * ss, cf * st * cs + sf * ss),
             (ct * ss, sf * st * ss + cf * cs, cf * st * ss - sf * cs),
             (-st, sf * ct, cf * ct))
 
 
+@njit(cache=True, inline='always', error_model='numpy')
+def _world_to_body(phi, theta, psi, vx, vy, vz):
+    r = _rotation(phi, theta, psi)
+    return (r[0][0] * vx + r[1][0] * vy + r[2][0] * vz,
+            r[0][1] * vx + r[1][1] * vy + r[2][1] * vz,
+            r[0][2] * vx + r[1][2] * vy + r[2][2] * vz)
+
+
+@njit(cache=True, inline='always', error_model='numpy')
+def _body_to_world(phi, theta, psi, vx, vy, vz):
+    r = _rotation(phi, theta, psi)
+    return (r[0][0] * vx + r[0][1] * vy + r[0][2] * vz,
+            r[1][0] * vx + r[1][1] * vy + r[1][2] * vz,
+            r[2][0] * vx + r[2][1] * vy + r[2][2] * vz)
+
+
+@njit(cache=True, inline='always', error_model='numpy')
+def _body_rates(phi, theta, dphi, dtheta, dpsi):
+    cf, sf = np.cos(phi), np.sin(phi)
+    ct, st = np.cos(theta), np.sin(theta)
+    return (dphi - st * dpsi,
+            cf * dtheta + sf * ct * dpsi,
+            -sf * dtheta + cf * ct * dpsi)
+
+
+@njit(cache=True, inline='always', error_model='numpy')
+def _euler_rates(phi, theta, p, q, r):
+    """(phi', theta', psi', cos theta): the rates NaN where |cos theta| < GIMBAL_LOCK_COSINE."""
+    ct = np.cos(theta)
+    ct = select(np.abs(ct) < GIMBAL_LOCK_COSINE, np.nan, ct)
+    cf, sf = np.cos(phi), np.sin(phi)
+    yaw_part = (q * sf + r * cf) / ct
+    return p + yaw_part * np.sin(theta), q * cf - r * sf, yaw_part, ct
+
+
+def kernel_numbers(*values) -> tuple:
+    """The values as the kernels take them: plain numbers as they are (numba types a float, a numpy
+    scalar or an int itself), arrays as float arrays, with every number a float once any value is an array."""
+    for value in values:
+        if isinstance(value, np.ndarray):
+            return tuple([np.asarray(v, dtype=float) if is_batch(v) else float(v) for v in values])
+    return values
+
+
+def check_orientation(q, norm) -> None:
+    """ValueError unless the quaternion ``q`` of one vehicle, of norm ``norm``, is an orientation (a batch: no check)."""
+    if not is_batch(norm) and (not norm > 0.0 or not math.isfinite(norm)):
+        raise ValueError(f'quaternion {tuple(q)} has no orientation (norm {norm})')   # a batch gets NaN there
+
+
+def check_pitch(theta, cos_theta) -> None:
+    """ValueError at gimbal lock of one vehicle: ``cos_theta`` as :func:`_euler_rates` returns it (a batch: no check)."""
+    if not is_batch(cos_theta) and math.isnan(cos_theta) and math.isfinite(theta):
+        raise ValueError(f'Euler rates are undefined at pitch {theta} rad (gimbal lock)')
+
+
+def quaternion_from_euler(phi: float, theta: float, psi: float) -> Quat:
+    """Unit quaternion (x, y, z, w) of R = Rz(psi) Ry(theta) Rx(phi); angles [rad]."""
+    return _quaternion(*kernel_numbers(phi, theta, psi))
+
+
+def euler_from_quaternion(q: Quat) -> Vec3:
+    """(phi, theta, psi) [rad] of a quaternion (x, y, z, w); normalised first, theta in [-pi/2, pi/2].
+
+    ValueError for one vehicle when the quaternion has no orientation (norm 0 or not finite)."""
+    phi, theta, psi, norm = _euler(*kernel_numbers(*q))
+    check_orientation(q, norm)
+    return phi, theta, psi
+
+
+def rotation_from_euler(phi: float, theta: float, psi: float) -> tuple[Vec3, Vec3, Vec3]:
+    """Rows of the body-to-world rotation matrix R = Rz(psi) Ry(theta) Rx(phi)."""
+    return _rotation(*kernel_numbers(phi, theta, psi))
+
+
 def world_to_body(euler: Vec3, v_world: Vec3) -> Vec3:
     """Express a world-frame vector [.., world ENU] in the body frame [.., body FLU]: R^T v."""
-    r = rotation_from_euler(*euler)
-    return (r[0][0] * v_world[0] + r[1][0] * v_world[1] + r[2][0] * v_world[2],
-            r[0][1] * v_world[0] + r[1][1] * v_world[1] + r[2][1] * v_world[2],
-            r[0][2] * v_world[0] + r[1][2] * v_world[1] + r[2][2] * v_world[2])
+    return _world_to_body(*kernel_numbers(*euler, *v_world))
 
 
 def body_to_world(euler: Vec3, v_body: Vec3) -> Vec3:
     """Express a body-frame vector [.., body FLU] in the world frame [.., world ENU]: R v."""
-    r = rotation_from_euler(*euler)
-    return tuple(row[0] * v_body[0] + row[1] * v_body[1] + row[2] * v_body[2] for row in r)
+    return _body_to_world(*kernel_numbers(*euler, *v_body))
 
 
 def body_rates_from_euler_rates(euler: Vec3, euler_rates: Vec3) -> Vec3:
     """Exact body rates (p, q, r) [rad/s, body FLU] from Z-Y-X Euler rates [rad/s]."""
     phi, theta, _ = euler
-    dphi, dtheta, dpsi = euler_rates
-    xp = namespace_for(theta)
-    cf, sf = xp.cos(phi), xp.sin(phi)
-    ct, st = xp.cos(theta), xp.sin(theta)
-    return (dphi - st * dpsi,
-            cf * dtheta + sf * ct * dpsi,
-            -sf * dtheta + cf * ct * dpsi)
+    return _body_rates(*kernel_numbers(phi, theta, *euler_rates))
 
 
 def euler_rates_from_body_rates(euler: Vec3, body_rates: Vec3) -> Vec3:
@@ -86,18 +158,12 @@ def euler_rates_from_body_rates(euler: Vec3, body_rates: Vec3) -> Vec3:
     batch the rates of such a vehicle become NaN (the others are unaffected).
     """
     phi, theta, _ = euler
-    p, q, r = body_rates
-    xp = namespace_for(theta)
-    ct = xp.cos(theta)
-    locked = xp.abs(ct) < 1e-9
-    if xp is SCALAR and locked:
-        raise ValueError(f'Euler rates are undefined at pitch {theta} rad (gimbal lock)')
-    ct = xp.where(locked, math.nan, ct)
-    cf, sf = xp.cos(phi), xp.sin(phi)
-    yaw_part = (q * sf + r * cf) / ct
-    return (p + yaw_part * xp.sin(theta), q * cf - r * sf, yaw_part)
+    dphi, dtheta, dpsi, cos_theta = _euler_rates(*kernel_numbers(phi, theta, *body_rates))
+    check_pitch(theta, cos_theta)
+    return dphi, dtheta, dpsi
 
 
-def wrap_angle(angle: float) -> float:
-    """Angle [rad] wrapped into [-pi, pi)."""
+@njit(cache=True, inline='always')
+def wrap_angle(angle):
+    """Angle [rad] wrapped into [-pi, pi) (a float, or elementwise an array)."""
     return (angle + math.pi) % (2.0 * math.pi) - math.pi

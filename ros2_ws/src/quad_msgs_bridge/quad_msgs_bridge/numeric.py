@@ -23,6 +23,8 @@ import math
 from types import SimpleNamespace
 
 import numpy as np
+from numba import types
+from numba.extending import overload
 
 
 def _clip(value: float, low: float, high: float) -> float:
@@ -81,3 +83,30 @@ def namespace_for(value, *more) -> SimpleNamespace:
 def is_batch(value) -> bool:
     """Whether ``value`` holds a batch of vehicles (a numpy array) rather than one vehicle."""
     return isinstance(value, np.ndarray)
+
+
+def select(condition, if_true, if_false):
+    """``if_true`` where ``condition`` holds, else ``if_false``: a float for a plain bool, an array (elementwise)
+    for a bool array. Also inside compiled kernels (numba), for the kernels that serve a vehicle and a batch."""
+    if isinstance(condition, np.ndarray):
+        return np.where(condition, if_true, if_false)
+    return if_true if condition else if_false
+
+
+@overload(select)
+def _select_compiled(condition, if_true, if_false):
+    if isinstance(condition, types.Array):
+        return lambda condition, if_true, if_false: np.where(condition, if_true, if_false)
+    return lambda condition, if_true, if_false: if_true if condition else if_false
+
+
+def every(condition) -> bool:
+    """Whether ``condition`` holds for every vehicle (a plain bool, or a bool array); also in compiled kernels."""
+    return bool(np.all(condition))
+
+
+@overload(every)
+def _every_compiled(condition):
+    if isinstance(condition, types.Array):
+        return lambda condition: condition.all()
+    return lambda condition: condition

@@ -18,9 +18,10 @@ from __future__ import annotations
 
 from typing import NamedTuple, Sequence
 
-from quad_msgs_bridge.frames import (Quat, Vec3, body_rates_from_euler_rates, euler_from_quaternion,
-                     euler_rates_from_body_rates, quaternion_from_euler, body_to_world,
-                     world_to_body)
+from numba import njit
+
+from quad_msgs_bridge.frames import (Quat, Vec3, _body_rates, _body_to_world, _euler, _euler_rates, _quaternion,
+                                     _world_to_body, check_orientation, check_pitch)
 
 X, Y, Z, VX, VY, VZ, PHI, THETA, PSI, DPHI, DTHETA, DPSI = range(12)
 STATE_SIZE = 12
@@ -37,20 +38,38 @@ class OdometrySample(NamedTuple):
     angular_velocity: Vec3    #: [rad/s, base_link FLU]
 
 
+@njit(cache=True, error_model='numpy')
+def _odometry_fields(x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi):
+    """(position, orientation, linear velocity [body], body rates) of a core state (numbers, or arrays for a
+    batch: numba builds one kernel per combination of argument types)."""
+    return ((x, y, z), _quaternion(phi, theta, psi), _world_to_body(phi, theta, psi, vx, vy, vz),
+            _body_rates(phi, theta, dphi, dtheta, dpsi))
+
+
+@njit(cache=True, error_model='numpy')
+def _state_fields(position, orientation, linear, angular):
+    """The 12 core states of odometry fields (floats or arrays), then the quaternion's norm and cos(pitch)
+    (NaN at gimbal lock), from which the caller tells a bad message."""
+    phi, theta, psi, norm = _euler(orientation[0], orientation[1], orientation[2], orientation[3])
+    vx, vy, vz = _body_to_world(phi, theta, psi, linear[0], linear[1], linear[2])
+    dphi, dtheta, dpsi, cos_theta = _euler_rates(phi, theta, angular[0], angular[1], angular[2])
+    return (position[0], position[1], position[2], vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi, norm, cos_theta)
+
+
 def odometry_from_state(stamp: float, state: Sequence[float]) -> OdometrySample:
-    """Odometry sample of a core state at sim time ``stamp`` [s]."""
-    euler = (state[PHI], state[THETA], state[PSI])
-    return OdometrySample(
-        stamp=stamp,
-        position=(state[X], state[Y], state[Z]),
-        orientation=quaternion_from_euler(*euler),
-        linear_velocity=world_to_body(euler, (state[VX], state[VY], state[VZ])),
-        angular_velocity=body_rates_from_euler_rates(euler, (state[DPHI], state[DTHETA], state[DPSI])))
+    """Odometry sample of a core state at sim time ``stamp`` [s] (floats, or arrays for a batch)."""
+    if len(state) != STATE_SIZE:
+        raise ValueError(f'state has {len(state)} components, expected {STATE_SIZE}')
+    return OdometrySample(stamp, *_odometry_fields(*state))
 
 
 def state_from_odometry(sample: OdometrySample) -> list[float]:
-    """Core state (12 paper states) of an odometry sample."""
-    euler = euler_from_quaternion(sample.orientation)
-    velocity = body_to_world(euler, sample.linear_velocity)
-    rates = euler_rates_from_body_rates(euler, sample.angular_velocity)
-    return [*sample.position, *velocity, *euler, *rates]
+    """Core state (12 paper states) of an odometry sample.
+
+    ValueError for one vehicle whose orientation is no rotation (quaternion norm 0 or not finite) or
+    at gimbal lock (:mod:`quad_msgs_bridge.frames`); a batch's such vehicles get NaN instead."""
+    *state, norm, cos_theta = _state_fields(tuple(sample.position), tuple(sample.orientation),
+                                            tuple(sample.linear_velocity), tuple(sample.angular_velocity))
+    check_orientation(sample.orientation, norm)
+    check_pitch(state[THETA], cos_theta)
+    return state

@@ -26,6 +26,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+from quad_msgs_bridge.mixer import controls_from_forces, saturate_forces
 from quad_msgs_bridge.state import STATE_SIZE
 from quad_msgs_bridge.vehicle_params import DISTURBANCE_CHANNELS, Disturbances, VehicleParams
 
@@ -73,11 +74,6 @@ def _disturbance(table, t):
 
 
 @njit(cache=True, inline='always')
-def _clipped(value, low, high):
-    return low if value < low else high if value > high else value
-
-
-@njit(cache=True, inline='always')
 def _controls(c, forces):
     """Virtual controls (U1 [N], U2 [N], U3 [N], U4 [N m]) the true rotors give for commanded thrusts [N].
 
@@ -85,13 +81,12 @@ def _controls(c, forces):
     rotor i gives the thrust T_i = f_i (1 - l_i) F_i and the reaction torque g_i (1 - l_i) (Kd/Kp) F_i;
     U1..U3 are eq. (2) of the thrusts, U4 eq. (2) of the torques (rotor order F1 front, F2 right,
     F3 back, F4 left: :mod:`quad_msgs_bridge.mixer`)."""
-    f1 = _clipped(forces[0], c[_FMIN], c[_FMAX])
-    f2 = _clipped(forces[1], c[_FMIN], c[_FMAX])
-    f3 = _clipped(forces[2], c[_FMIN], c[_FMAX])
-    f4 = _clipped(forces[3], c[_FMIN], c[_FMAX])
-    t1, t2, t3, t4 = f1 * c[_THRUST], f2 * c[_THRUST + 1], f3 * c[_THRUST + 2], f4 * c[_THRUST + 3]
-    q1, q2, q3, q4 = f1 * c[_TORQUE], f2 * c[_TORQUE + 1], f3 * c[_TORQUE + 2], f4 * c[_TORQUE + 3]
-    return t1 + t2 + t3 + t4, t4 - t2, t3 - t1, c[_YAW] * (-q1 + q2 - q3 + q4)
+    f1, f2, f3, f4 = saturate_forces(forces, c[_FMIN], c[_FMAX])
+    u1, u2, u3, _ = controls_from_forces(f1 * c[_THRUST], f2 * c[_THRUST + 1], f3 * c[_THRUST + 2],
+                                         f4 * c[_THRUST + 3], c[_YAW])
+    u4 = controls_from_forces(f1 * c[_TORQUE], f2 * c[_TORQUE + 1], f3 * c[_TORQUE + 2], f4 * c[_TORQUE + 3],
+                              c[_YAW])[3]
+    return u1, u2, u3, u4
 
 
 @njit(cache=True, inline='always')
