@@ -26,9 +26,10 @@ from dataclasses import dataclass
 from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
+from numba import njit
 
 from nnit2fsmc_controller.controller import CascadedController, ControlOutput
-from quad_msgs_bridge.numeric import namespace_for
+from quad_msgs_bridge.numeric import namespace_for, select
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.review.metrics import StatisticsAccumulator
 from quad_msgs_bridge.state import PHI, PSI, THETA, Z
@@ -58,6 +59,27 @@ class FailureRules:
 
     settle_time: float
     max_error: float
+
+
+@njit(cache=True, error_model='numpy')
+def failure_code(state, x_ref, y_ref, z_ref, airborne, tracking, max_error):
+    """(the code of the first FAILURES rule the 12-state ``state`` breaks, -1 if none; whether the vehicle has
+    been airborne) of one vehicle (floats) or per vehicle of a batch (arrays). ``tracking``: whether the
+    position error to the reference (x_ref, y_ref, z_ref) [m] may exceed ``max_error`` [m] no more (after
+    settling); ``airborne``: whether the vehicle had been above AIRBORNE_HEIGHT before (FailureRules)."""
+    finite = np.isfinite(state[0])
+    for i in range(1, 12):
+        finite = finite & np.isfinite(state[i])
+    code = select(finite, -1, 0)
+    phi, theta, height = select(finite, state[PHI], 0.0), select(finite, state[THETA], 0.0), select(finite, state[Z], 0.0)
+    code = select((code < 0) & (np.cos(phi) * np.cos(theta) <= 0.0), 1, code)
+    code = select((code < 0) & airborne & (height <= 0.0), 2, code)
+    x, y, z = state[0], state[1], state[2]
+    error = np.sqrt((x - x_ref) * (x - x_ref) + (y - y_ref) * (y - y_ref) + (z - z_ref) * (z - z_ref))
+    if tracking:
+        code = select((code < 0) & (error > max_error), 3, code)
+    code = select((code < 0) & (error > ARENA_RADIUS), 4, code)
+    return code, airborne | (height > AIRBORNE_HEIGHT)
 
 
 class LoopStep(NamedTuple):
@@ -151,20 +173,10 @@ class ClosedLoop:
     def _check(self, t: float, previous: list, reference: ReferenceSample) -> None:
         """Fail the vehicles that broke a rule at sim time t [s]; a failed vehicle stays where it was."""
         state = self.simulator.state
-        xp = namespace_for(state[0])
-        finite = xp.finite_each(state)
-        code = xp.where(finite, -1, 0)
-        phi, theta = xp.where(finite, state[PHI], 0.0), xp.where(finite, state[THETA], 0.0)
-        code = xp.where((code < 0) & (xp.cos(phi) * xp.cos(theta) <= 0.0), 1, code)
-        height = xp.where(finite, state[Z], 0.0)
-        code = xp.where((code < 0) & self.airborne & (height <= 0.0), 2, code)
-        self.airborne = self.airborne | (height > AIRBORNE_HEIGHT)
-        (x, y, z), (x_ref, y_ref, z_ref) = state[:3], reference.position
-        with self._quiet():
-            error = xp.sqrt((x - x_ref) * (x - x_ref) + (y - y_ref) * (y - y_ref) + (z - z_ref) * (z - z_ref))
-        if t >= self.rules.settle_time:
-            code = xp.where((code < 0) & (error > self.rules.max_error), 3, code)
-        code = xp.where((code < 0) & (error > ARENA_RADIUS), 4, code)
+        x_ref, y_ref, z_ref = reference.position
+        code, self.airborne = failure_code(tuple(state), x_ref, y_ref, z_ref, self.airborne,
+                                           t >= self.rules.settle_time, self.rules.max_error)
+        xp = namespace_for(code)
         self._fail(code >= 0, code, t)
         frozen = self.failure >= 0
         if xp.any(frozen):

@@ -21,6 +21,7 @@ from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoi
 from quad_msgs_bridge.bag.flight_bag import FlightBag
 from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
 from quad_msgs_bridge.reference import ReferenceSample, SetpointPath
+from quad_msgs_bridge.runtime import freeze_long_lived_objects
 from quad_msgs_bridge.state import PSI, OdometrySample, odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.model import QuadrotorModel
@@ -110,6 +111,7 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     recorder = FlightRecorder()
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
+    freeze_long_lived_objects()
     started = time.perf_counter()
     slopes = controller.surface_slopes()   # the gains do not change during an embedded flight
     step_sinks = ([bag] if bag is not None else []) + list(sinks)
@@ -120,9 +122,7 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
             raise KeyboardInterrupt(f'stopped after {k} control steps')
         done = loop.step()
         out, reference, truth = done.output, done.reference, done.truth
-        axes = out.axes.values()
-        surfaces, equivalent, corrective = ([a.surface for a in axes], [a.equivalent for a in axes],
-                                            [a.corrective for a in axes])
+        surfaces, equivalent, corrective = [list(field) for field in zip(*out.axes.values())][1:]   # per subsystem
         recorder.append(done.time, truth[:3], truth[PSI], reference.position, reference.yaw,
                         out.forces, out.controls, surfaces, equivalent, corrective)
         truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
@@ -182,6 +182,7 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
     recorders = [FlightRecorder() for _ in trajectories]
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
+    freeze_long_lived_objects()
     started = time.perf_counter()
     if bag is not None:
         for vehicle_bag, path in zip(bag.vehicles, published):

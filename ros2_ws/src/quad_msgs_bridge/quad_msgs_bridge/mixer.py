@@ -47,10 +47,15 @@ def clipped(value, low, high):
 
 
 @njit(cache=True, inline='always')
-def saturate_forces(forces, f_min, f_max):
-    """Each rotor thrust of the 4-tuple ``forces`` clipped to its physical range [f_min, f_max] [N]."""
+def saturated(forces, f_min, f_max):
+    """Each rotor thrust of the 4-tuple ``forces`` clipped to its physical range [f_min, f_max] [N] (kernels)."""
     return (clipped(forces[0], f_min, f_max), clipped(forces[1], f_min, f_max), clipped(forces[2], f_min, f_max),
             clipped(forces[3], f_min, f_max))
+
+
+def saturate_forces(forces, f_min, f_max):
+    """Each rotor thrust of ``forces`` (F1..F4, any sequence) clipped to its physical range [f_min, f_max] [N]."""
+    return saturated(tuple(forces), f_min, f_max)
 
 
 @njit(cache=True, error_model='numpy')
@@ -60,7 +65,7 @@ def clip_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
     Paper-faithful (the paper has no rotor limits), but a large yaw or roll demand can take lift away:
     two rotors clipped at f_min leave U1 below what was commanded.
     """
-    return saturate_forces(forces_from_controls(u1, u2, u3, u4, yaw_coefficient), f_min, f_max)
+    return saturated(forces_from_controls(u1, u2, u3, u4, yaw_coefficient), f_min, f_max)
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -112,7 +117,7 @@ def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
     shift = clipped(yaw, np.maximum(scale * pitch - above, scale * roll - below),
                     np.minimum(below - scale * pitch, above - scale * roll))
     forces = (mean - half_pitch - shift, mean - half_roll + shift, mean + half_pitch - shift, mean + half_roll + shift)
-    forces = saturate_forces(forces, f_min, f_max)   # removes rounding only (1e-16 N)
+    forces = saturated(forces, f_min, f_max)   # removes rounding only (1e-16 N)
     return (select(fits, demanded[0], forces[0]), select(fits, demanded[1], forces[1]),   # a batch: per vehicle
             select(fits, demanded[2], forces[2]), select(fits, demanded[3], forces[3]))
 

@@ -130,9 +130,8 @@ class SetpointPath:
         s = (t - times[i]) / (times[i + 1] - times[i])
         (x, vx, ax, jx, sx), (y, vy, ay, jy, sy), (z, vz, az, jz, sz), (yaw, yaw_rate, yaw_acc, _, _) = \
             _quintic_channels(self._coefficients, s)
-        return ReferenceSample(position=(x, y, z), velocity=(vx, vy, vz), acceleration=(ax, ay, az),
-                               yaw=_wrap(yaw), yaw_rate=yaw_rate, yaw_acceleration=yaw_acc,
-                               jerk=(jx, jy, jz), snap=(sx, sy, sz))
+        return ReferenceSample((x, y, z), (vx, vy, vz), (ax, ay, az), _wrap(yaw), yaw_rate, yaw_acc, (jx, jy, jz),
+                               (sx, sy, sz))
 
     def _segment_coefficients(self, i: int) -> np.ndarray:
         """One row per channel x, y, z, yaw: the interpolant's coefficients between points i and i + 1

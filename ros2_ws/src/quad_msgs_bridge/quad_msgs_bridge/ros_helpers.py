@@ -20,6 +20,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 
 from quad_msgs_bridge.contract import QosSpec, TopicSpec, resolve
 from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
+from quad_msgs_bridge.runtime import freeze_long_lived_objects
 from quad_msgs_bridge.vehicle_params import ParameterError
 
 _RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE, 'best_effort': ReliabilityPolicy.BEST_EFFORT}
@@ -119,6 +120,7 @@ def run_node(make_node: Callable[[MessageKit], Node], argv: list[str] | None = N
         node = make_node(rclpy_kit())
         executor = SingleThreadedExecutor()
         executor.add_node(node)
+        freeze_long_lived_objects()     # no 80 ms garbage-collector pause in the middle of a flight
         spin_until_stopped(executor, signals)
     except ParameterError as error:
         print(f'[FATAL] invalid parameter: {error}', file=sys.stderr, flush=True)

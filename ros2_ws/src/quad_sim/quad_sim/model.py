@@ -26,7 +26,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
-from quad_msgs_bridge.mixer import controls_from_forces, saturate_forces
+from quad_msgs_bridge.mixer import controls_from_forces, saturated
 from quad_msgs_bridge.state import STATE_SIZE
 from quad_msgs_bridge.vehicle_params import DISTURBANCE_CHANNELS, Disturbances, VehicleParams
 
@@ -81,7 +81,7 @@ def _controls(c, forces):
     rotor i gives the thrust T_i = f_i (1 - l_i) F_i and the reaction torque g_i (1 - l_i) (Kd/Kp) F_i;
     U1..U3 are eq. (2) of the thrusts, U4 eq. (2) of the torques (rotor order F1 front, F2 right,
     F3 back, F4 left: :mod:`quad_msgs_bridge.mixer`)."""
-    f1, f2, f3, f4 = saturate_forces(forces, c[_FMIN], c[_FMAX])
+    f1, f2, f3, f4 = saturated(forces, c[_FMIN], c[_FMAX])
     u1, u2, u3, _ = controls_from_forces(f1 * c[_THRUST], f2 * c[_THRUST + 1], f3 * c[_THRUST + 2],
                                          f4 * c[_THRUST + 3], c[_YAW])
     u4 = controls_from_forces(f1 * c[_TORQUE], f2 * c[_TORQUE + 1], f3 * c[_TORQUE + 2], f4 * c[_TORQUE + 3],
@@ -235,15 +235,16 @@ class QuadrotorModel:
             air = air_velocity if windy else (0.0, 0.0, 0.0)
             return list(_rk4_batch(self._constants, self._table, float(t), _arrays(s, count), _arrays(forces, count),
                                    float(dt), _arrays(air, count), windy))
-        return list(_step_one(self._constants, self._table, float(t), _floats(s, STATE_SIZE), _floats(forces, 4),
-                              float(dt), _floats(air_velocity if windy else (0.0, 0.0, 0.0), 3), windy))
+        return list(_step_one(self._constants, self._table, t, _floats(s, STATE_SIZE), _floats(forces, 4), dt,
+                              _floats(air_velocity, 3) if windy else (0.0, 0.0, 0.0), windy))
 
 
 def _floats(values: Sequence, size: int) -> tuple:
-    """A tuple of ``size`` floats (the kernels' type for one vehicle)."""
+    """``size`` numbers as a tuple, the kernels' type for one vehicle (numba types a float, a numpy float
+    and an int itself)."""
     if len(values) != size:
         raise ValueError(f'expected {size} values, got {len(values)}')
-    return tuple([float(v) for v in values])
+    return tuple(values)
 
 
 def _arrays(values: Sequence, count: int) -> tuple:

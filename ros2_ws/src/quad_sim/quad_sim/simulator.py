@@ -75,9 +75,10 @@ class Simulator:
             valid = np.isfinite(forces[0]) & np.isfinite(forces[1]) & np.isfinite(forces[2]) & np.isfinite(forces[3])
             self.forces = tuple(np.where(valid, f, old) for f, old in zip(forces, self.forces))
             return bool(valid.all())
-        if not all(map(math.isfinite, forces)):
+        f1, f2, f3, f4 = forces
+        if not (math.isfinite(f1) and math.isfinite(f2) and math.isfinite(f3) and math.isfinite(f4)):
             return False
-        self.forces = tuple(float(f) for f in forces)
+        self.forces = (float(f1), float(f2), float(f3), float(f4))
         return True
 
     def advance(self, steps: int = 1) -> None:

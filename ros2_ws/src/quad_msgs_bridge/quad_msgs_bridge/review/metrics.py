@@ -7,6 +7,7 @@ the recorded topics. :func:`flight_metrics` turns either into the numbers of ``s
 """
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -65,8 +66,11 @@ class FlightRecorder:
     def record(self) -> FlightRecord:
         if not self.rows:
             raise ValueError('no control step was recorded')
-        columns = list(zip(*self.rows))
-        return FlightRecord(*(np.asarray(column, dtype=float) for column in columns))
+        count = len(self.rows)
+        return FlightRecord(*(np.asarray(column, dtype=float) if not isinstance(column[0], (tuple, list)) else
+                              np.fromiter(itertools.chain.from_iterable(column), dtype=float,
+                                          count=count * len(column[0])).reshape(count, -1)
+                              for column in zip(*self.rows)))
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:
