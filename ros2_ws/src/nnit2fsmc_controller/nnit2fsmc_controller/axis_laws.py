@@ -125,12 +125,13 @@ class NNIT2FSMCLaw:
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         """Takes the learning step still pending, then S, U_fuzzy(S) and U_eq_hat(Z) (:func:`nnit2fsmc_step`)."""
         net = self.network
-        pending = self._teaching is not None
+        teaching = self._teaching
+        pending = teaching is not None
         if net.batch is None:
             inputs = (1.0,) if self.bias_only else (float(ref_vel), float(ref_acc), 1.0)
             value, surface, equivalent, corrective, self._teaching, net._output = nnit2fsmc_step(
                 net.hidden_weights, net.output_weights, net._hidden_anchor, net._output_anchor, net._hidden,
-                net._inputs, net._output, pending, self._teaching if pending else 0.0, net.kernel_constants,
+                net._inputs, net._output, pending, teaching if pending else 0.0, net.kernel_constants,
                 self.fuzzy.kernel_parameters, self.lam, float(e), float(de), inputs, bool(self.learning))
             net._inputs = inputs
             return AxisOutput(value, surface, equivalent, corrective)
@@ -138,7 +139,7 @@ class NNIT2FSMCLaw:
         inputs = net.stacked_inputs((1.0,) if self.bias_only else (ref_vel, ref_acc, 1.0))
         learning = np.empty(count, dtype=bool)
         learning[:] = self.learning
-        teaching = self._teaching if pending else np.zeros(count)
+        teaching = teaching if pending else np.zeros(count)
         values, net._output = _nnit2fsmc_batch(
             net.hidden_weights, net.output_weights, net._hidden_anchor, net._output_anchor, net._hidden,
             net._inputs, net._output, pending, _per_vehicle(teaching, count), net.kernel_constants,

@@ -154,6 +154,10 @@ class EquivalentControlNetwork:
         self.output_weights = np.zeros(vehicles + (n_hidden,))
         #: anchors W0 of the leakage: the initial weights
         self._hidden_anchor, self._output_anchor = self.hidden_weights.copy(), self.output_weights.copy()
+        #: (learning rate, K_eq, leakage, e-modification?, weight limit): the learning step's constants, in
+        #: :func:`learning_step`'s order (a network's constants are fixed when it is built; a retune builds a new one)
+        self.kernel_constants = (self.learning_rate, self.output_gain, self.leakage, self.modification == 'e',
+                                 self.weight_limit)
         self._inputs = (0.0,) * n_inputs if batch is None else np.zeros((batch, n_inputs))
         self._hidden = np.zeros(vehicles + (n_hidden,))
         self._output = 0.0 if batch is None else np.zeros(batch)
@@ -178,12 +182,6 @@ class EquivalentControlNetwork:
         for i, z in enumerate(inputs):
             stacked[:, i] = z
         return stacked
-
-    @property
-    def kernel_constants(self) -> tuple:
-        """(learning rate, K_eq, leakage, e-modification?, weight limit): the learning step's constants, in
-        :func:`learning_step`'s order."""
-        return (self.learning_rate, self.output_gain, self.leakage, self.modification == 'e', self.weight_limit)
 
     def gradients(self, u_fuzzy: float) -> tuple[np.ndarray, np.ndarray]:
         """(dE/dWy, dE/dWz) of eqs. (8) and (9) at the last forward pass, error measured by u_fuzzy (one vehicle)."""

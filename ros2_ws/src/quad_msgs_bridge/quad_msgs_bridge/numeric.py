@@ -16,6 +16,11 @@ element per vehicle. Both namespaces offer the same primitives with the same mea
 
 A single vehicle runs on plain floats because numpy's per-call overhead (a microsecond) is far
 larger than the arithmetic of one vehicle; a batch pays that overhead once for every vehicle.
+
+The hot equations (model, frames, mixer, eq. 10, filters, failure rules, the NNIT2FSMC law) are
+compiled kernels instead (numba), written once with ``numpy`` functions, which numba builds for
+floats and for arrays alike; :func:`select` and :func:`every` are the two primitives above that
+they need in a form numba compiles for both (a plain bool or a bool array).
 """
 from __future__ import annotations
 
