@@ -147,8 +147,8 @@ class ClosedLoop:
         with self._quiet():
             seen, observation = (measured, None) if self.observe is None else self.observe(t, measured)
         xp = namespace_for(seen[0])
-        unreadable = xp.where(xp.finite_each(seen), False, True)
-        if xp.any(unreadable):
+        if not xp.all_finite(seen):
+            unreadable = xp.where(xp.finite_each(seen), False, True)
             self._fail(unreadable, 0, t)
             seen = [xp.where(unreadable, 0.0, value) for value in seen]
         reference = self.reference(t)
