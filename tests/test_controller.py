@@ -329,8 +329,11 @@ sys.path[:0] = sys.argv[1:]
 from nnit2fsmc_controller.factory import compile_kernels, load_gains
 from nnit2fsmc_controller.axis_laws import nnit2fsmc_step
 from nnit2fsmc_controller.neural_network import learning_step
+from quad_msgs_bridge.frames import _quaternion
+from quad_msgs_bridge.reference import _quintic_channels
+from quad_msgs_bridge.state import _state_fields
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
-kernels = (nnit2fsmc_step, learning_step)
+kernels = (_state_fields, _quintic_channels, nnit2fsmc_step, learning_step, _quaternion)
 before = [len(kernel.signatures) for kernel in kernels]
 compile_kernels('nnit2fsmc', load_vehicle_file()[0], load_gains())
 print(json.dumps([before, [len(kernel.signatures) for kernel in kernels]]))
@@ -338,10 +341,11 @@ print(json.dumps([before, [len(kernel.signatures) for kernel in kernels]]))
 
 
 def test_compile_kernels_builds_every_kernel_of_a_single_vehicle_before_its_first_update():
-    """What the ROS controller node runs before subscribing: afterwards the first answer needs no compiling."""
+    """What the ROS controller node runs before subscribing: afterwards the first answer (odometry, path
+    sample, update, learning step, reference pose) needs no compiling."""
     root = Path(__file__).resolve().parent.parent
     paths = [str(root / 'ros2_ws' / 'src' / package) for package in ('quad_msgs_bridge', 'nnit2fsmc_controller')]
     result = subprocess.run([sys.executable, '-c', COMPILED_KERNELS, *paths], capture_output=True, text=True,
                             timeout=300, check=True)
     before, after = json.loads(result.stdout)
-    assert before == [0, 0] and all(count >= 1 for count in after)
+    assert before == [0] * 5 and all(count >= 1 for count in after)

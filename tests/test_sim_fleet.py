@@ -1,4 +1,9 @@
 """The simulator's fleet core: vehicle namespaces, initial states, stepping together, answers paired by vehicle."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
@@ -81,3 +86,27 @@ def test_a_lone_vehicle_completes_each_step_with_its_answer():
 def test_an_invalid_initial_state_names_the_vehicle():
     with pytest.raises(ValueError, match='vehicle 2: state component 4 is nan'):
         Fleet(QuadrotorModel(PARAMS, DISTURBANCES), 1e-3, [[0.0] * 12, [0.0] * 4 + [float('nan')] + [0.0] * 7])
+
+
+COMPILED_KERNELS = '''
+import json, sys
+sys.path[:0] = sys.argv[1:]
+from quad_msgs_bridge.state import _odometry_fields
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from quad_sim.model import QuadrotorModel, _step_one
+from quad_sim.simulator import compile_kernels
+kernels = (_step_one, _odometry_fields)
+before = [len(kernel.signatures) for kernel in kernels]
+compile_kernels(QuadrotorModel(*load_vehicle_file()), 1e-3)
+print(json.dumps([before, [len(kernel.signatures) for kernel in kernels]]))
+'''
+
+
+def test_compile_kernels_builds_the_step_and_odometry_kernels_before_the_first_step():
+    """What the ROS simulator node runs before publishing: afterwards its first steps need no compiling."""
+    root = Path(__file__).resolve().parent.parent
+    paths = [str(root / 'ros2_ws' / 'src' / package) for package in ('quad_msgs_bridge', 'quad_sim')]
+    result = subprocess.run([sys.executable, '-c', COMPILED_KERNELS, *paths], capture_output=True, text=True,
+                            timeout=300, check=True)
+    before, after = json.loads(result.stdout)
+    assert before == [0, 0] and all(count >= 1 for count in after)

@@ -6,8 +6,10 @@ from typing import Any, Mapping
 
 import yaml
 
+from quad_msgs_bridge.frames import quaternion_from_euler
 from quad_msgs_bridge.mixer import ALLOCATIONS
-from quad_msgs_bridge.reference import hold
+from quad_msgs_bridge.reference import SetpointPath, hold
+from quad_msgs_bridge.state import odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
 from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
@@ -173,16 +175,19 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
 
 
 def compile_kernels(kind: str, params: VehicleParams, gains: Mapping[str, Any] | None = None) -> None:
-    """Have numba build, or load from its cache, the compiled kernels a ``kind`` controller runs for one
-    vehicle: two updates and learning steps of a throwaway controller hovering at 1 m (0.3 s from the cache; seconds the
-    first time after an install). A ROS controller node does this before it subscribes, so its first
-    answer is as quick as the others (a lockstep simulator publishes an odometry again when the
-    answer takes longer than its ``input_timeout``)."""
+    """Have numba build, or load from its cache, the compiled kernels a ``kind`` controller node runs per
+    step: the odometry conversion, the sampling of a setpoint path, two updates and learning steps of a
+    throwaway controller hovering at 1 m, the reference pose's quaternion (0.3 s from the cache;
+    seconds the first time after an install). A ROS controller node does this before it subscribes, so
+    its first answer is as quick as the others (a lockstep simulator publishes an odometry again when
+    the answer takes longer than its ``input_timeout``)."""
     controller = build_controller(kind, params, gains)
-    hover = [0.0, 0.0, 1.0] + [0.0] * 9
+    hover = state_from_odometry(odometry_from_state(0.0, [0.0, 0.0, 1.0] + [0.0] * 9))
+    path = SetpointPath([0.0, 1.0], [hold((0.0, 0.0, 1.0)), hold((0.0, 0.0, 1.0))])
     for t in (0.0, controller.dt):
-        controller.update(t, hover, hold((0.0, 0.0, 1.0)))
+        controller.update(t, hover, path.sample(t))
         controller.adapt()     # as the node does after publishing
+    quaternion_from_euler(0.0, 0.0, 0.0)
 
 
 def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt: float,

@@ -201,11 +201,6 @@ class QuadrotorModel:
         self._constants = vehicle_constants(params)
         self._table = disturbance_table(disturbances)
 
-    def compile_kernels(self) -> None:
-        """Have numba build, or load from its cache, the kernel of a single vehicle's step (0.1 s from the
-        cache; seconds the first time after an install): one throwaway step at rest on the ground."""
-        self.step(0.0, [0.0] * STATE_SIZE, (0.0,) * 4, 1e-3)
-
     def controls(self, forces: Sequence) -> tuple:
         """Virtual controls (U1 [N], U2 [N], U3 [N], U4 [N m]) the true rotors of one vehicle give for
         commanded thrusts F1..F4 [N] (clipped to the rotor range first)."""

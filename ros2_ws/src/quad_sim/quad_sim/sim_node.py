@@ -38,6 +38,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .fleet import Fleet, LockstepAnswers, split_initial_states
 from .model import QuadrotorModel
+from .simulator import compile_kernels
 
 MODES = ('lockstep', 'realtime')
 MAX_CATCH_UP = 100   #: realtime: most control steps integrated in one timer tick after a stall
@@ -84,7 +85,7 @@ class SimNode(Node):
         self.substeps = int(round(substeps))
         namespaces = vehicle_namespaces(self.get_namespace(), names)
         model = QuadrotorModel(params, disturbances)
-        model.compile_kernels()   # before publishing: the first step is not slower than the others
+        compile_kernels(model, 1.0 / physics_rate)   # before publishing: the first step is not slower than the others
         try:
             self.fleet = Fleet(model, 1.0 / physics_rate, split_initial_states(start, len(namespaces)))
         except ParameterError:
