@@ -71,7 +71,8 @@ def failure_code(state, x_ref, y_ref, z_ref, airborne, tracking, max_error):
     for i in range(1, 12):
         finite = finite & np.isfinite(state[i])
     code = select(finite, -1, 0)
-    phi, theta, height = select(finite, state[PHI], 0.0), select(finite, state[THETA], 0.0), select(finite, state[Z], 0.0)
+    phi, theta = select(finite, state[PHI], 0.0), select(finite, state[THETA], 0.0)
+    height = select(finite, state[Z], 0.0)
     code = select((code < 0) & (np.cos(phi) * np.cos(theta) <= 0.0), 1, code)
     code = select((code < 0) & airborne & (height <= 0.0), 2, code)
     x, y, z = state[0], state[1], state[2]

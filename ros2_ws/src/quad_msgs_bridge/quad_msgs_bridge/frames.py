@@ -105,13 +105,15 @@ def kernel_numbers(*values) -> tuple:
 
 
 def check_orientation(q, norm) -> None:
-    """ValueError unless the quaternion ``q`` of one vehicle, of norm ``norm``, is an orientation (a batch: no check)."""
+    """ValueError unless the quaternion ``q`` of one vehicle, of norm ``norm``, is an orientation (a batch:
+    no check)."""
     if not is_batch(norm) and (not norm > 0.0 or not math.isfinite(norm)):
         raise ValueError(f'quaternion {tuple(q)} has no orientation (norm {norm})')   # a batch gets NaN there
 
 
 def check_pitch(theta, cos_theta) -> None:
-    """ValueError at gimbal lock of one vehicle: ``cos_theta`` as :func:`_euler_rates` returns it (a batch: no check)."""
+    """ValueError at gimbal lock of one vehicle: ``cos_theta`` as :func:`_euler_rates` returns it (a batch:
+    no check)."""
     if not is_batch(cos_theta) and math.isnan(cos_theta) and math.isfinite(theta):
         raise ValueError(f'Euler rates are undefined at pitch {theta} rad (gimbal lock)')
 

@@ -16,6 +16,8 @@ from typing import NamedTuple, Sequence
 import numpy as np
 from numba import njit
 
+from quad_msgs_bridge.frames import wrap_angle
+
 Vec3 = tuple[float, float, float]
 
 
@@ -35,10 +37,6 @@ class ReferenceSample(NamedTuple):
 def hold(position: Sequence[float], yaw: float = 0.0) -> ReferenceSample:
     """A reference that holds ``position`` [m, world ENU] at heading ``yaw`` [rad]."""
     return ReferenceSample(tuple(float(v) for v in position), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), float(yaw))
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def _quintic_coefficients(p0, v0, a0, p1, v1, a1, h) -> tuple:
@@ -130,8 +128,8 @@ class SetpointPath:
         s = (t - times[i]) / (times[i + 1] - times[i])
         (x, vx, ax, jx, sx), (y, vy, ay, jy, sy), (z, vz, az, jz, sz), (yaw, yaw_rate, yaw_acc, _, _) = \
             _quintic_channels(self._coefficients, s)
-        return ReferenceSample((x, y, z), (vx, vy, vz), (ax, ay, az), _wrap(yaw), yaw_rate, yaw_acc, (jx, jy, jz),
-                               (sx, sy, sz))
+        return ReferenceSample((x, y, z), (vx, vy, vz), (ax, ay, az), wrap_angle(yaw), yaw_rate, yaw_acc,
+                               (jx, jy, jz), (sx, sy, sz))
 
     def _segment_coefficients(self, i: int) -> np.ndarray:
         """One row per channel x, y, z, yaw: the interpolant's coefficients between points i and i + 1
@@ -140,6 +138,6 @@ class SetpointPath:
         h = self.times[i + 1] - self.times[i]
         axes = tuple(_quintic_coefficients(a.position[k], a.velocity[k], a.acceleration[k],
                                            b.position[k], b.velocity[k], b.acceleration[k], h) for k in range(3))
-        yaw = _quintic_coefficients(a.yaw, a.yaw_rate, a.yaw_acceleration, a.yaw + _wrap(b.yaw - a.yaw),
+        yaw = _quintic_coefficients(a.yaw, a.yaw_rate, a.yaw_acceleration, a.yaw + wrap_angle(b.yaw - a.yaw),
                                     b.yaw_rate, b.yaw_acceleration, h)
         return np.array((*axes, yaw))

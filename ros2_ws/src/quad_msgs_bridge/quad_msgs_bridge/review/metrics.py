@@ -73,10 +73,6 @@ class FlightRecorder:
                               for column in zip(*self.rows)))
 
 
-def _wrap(angle: np.ndarray) -> np.ndarray:
-    return (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
 def fuzzy_share(record: FlightRecord, window: float) -> dict[str, list[float]]:
     """Per subsystem and per consecutive window of ``window`` [s]: mean|corrective| / mean(|equivalent| + |corrective|).
 
@@ -129,7 +125,7 @@ def record_statistics(record: FlightRecord, settle_time: float, f_min: float, f_
     """The statistics of a whole recorded flight."""
     settled = record.time >= record.time[0] + settle_time
     error = np.linalg.norm(record.position - record.reference_position, axis=1)[settled]
-    yaw_error = _wrap(record.yaw - record.reference_yaw)[settled]
+    yaw_error = wrap_angle(record.yaw - record.reference_yaw)[settled]
     t = record.time[settled]
     at_limit = rotor_at_limit(record.forces.T, f_min, f_max)
     return TrackingStatistics(
