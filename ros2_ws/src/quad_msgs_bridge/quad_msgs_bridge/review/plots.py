@@ -22,8 +22,9 @@ from typing import Sequence
 import numpy as np
 
 from quad_msgs_bridge.conversions import SUBSYSTEM_NAMES
+from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.review.flight_from_bag import BagFlight
-from quad_msgs_bridge.review.metrics import SHARE_WINDOW, _wrap, fuzzy_share, has_fuzzy_term
+from quad_msgs_bridge.review.metrics import SHARE_WINDOW, fuzzy_share, has_fuzzy_term
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS, ROTOR_NAMES
 
 FINE_SHARE_WINDOW = 0.5   #: [s] short windows of the fuzzy-share plot (the metrics use SHARE_WINDOW)
@@ -99,7 +100,7 @@ def plot_tracking(plt, flights: Sequence[BagFlight], path: Path) -> Path:
         for i, flight in enumerate(flights):
             r = flight.record
             if row == 3:
-                value, error = np.unwrap(r.yaw), _wrap(r.yaw - r.reference_yaw)
+                value, error = np.unwrap(r.yaw), wrap_angle(r.yaw - r.reference_yaw)
             else:
                 value, error = r.position[:, row], r.position[:, row] - r.reference_position[:, row]
             settled = r.time >= r.time[0] + flight.settle_time
