@@ -60,20 +60,27 @@ def _rotation(phi, theta, psi):
             (-st, sf * ct, cf * ct))
 
 
+@njit(cache=True, inline='always')
+def _transposed(r):
+    return (r[0][0], r[1][0], r[2][0]), (r[0][1], r[1][1], r[2][1]), (r[0][2], r[1][2], r[2][2])
+
+
+@njit(cache=True, inline='always')
+def _times(r, vx, vy, vz):
+    """The matrix of rows ``r`` times the vector (vx, vy, vz)."""
+    return (r[0][0] * vx + r[0][1] * vy + r[0][2] * vz,
+            r[1][0] * vx + r[1][1] * vy + r[1][2] * vz,
+            r[2][0] * vx + r[2][1] * vy + r[2][2] * vz)
+
+
 @njit(cache=True, inline='always', error_model='numpy')
 def _world_to_body(phi, theta, psi, vx, vy, vz):
-    r = _rotation(phi, theta, psi)
-    return (r[0][0] * vx + r[1][0] * vy + r[2][0] * vz,
-            r[0][1] * vx + r[1][1] * vy + r[2][1] * vz,
-            r[0][2] * vx + r[1][2] * vy + r[2][2] * vz)
+    return _times(_transposed(_rotation(phi, theta, psi)), vx, vy, vz)
 
 
 @njit(cache=True, inline='always', error_model='numpy')
 def _body_to_world(phi, theta, psi, vx, vy, vz):
-    r = _rotation(phi, theta, psi)
-    return (r[0][0] * vx + r[0][1] * vy + r[0][2] * vz,
-            r[1][0] * vx + r[1][1] * vy + r[1][2] * vz,
-            r[2][0] * vx + r[2][1] * vy + r[2][2] * vz)
+    return _times(_rotation(phi, theta, psi), vx, vy, vz)
 
 
 @njit(cache=True, inline='always', error_model='numpy')
