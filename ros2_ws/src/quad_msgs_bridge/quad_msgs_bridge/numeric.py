@@ -4,23 +4,21 @@ Equations are written once against a namespace ``xp``; :func:`namespace_for` pic
 plain-float one for a single vehicle and the numpy one when the values are arrays with one
 element per vehicle. Both namespaces offer the same primitives with the same meaning:
 
-* ``sin cos asin atan atan2 tanh hypot sqrt exp expm1 abs floor``: as in :mod:`math`, elementwise;
+* ``sin cos atan2 hypot sqrt exp expm1 abs``: as in :mod:`math`, elementwise;
 * ``minimum(a, b)``, ``maximum(a, b)``, ``clip(v, low, high)``, ``where(condition, a, b)``;
 * ``sign(v)``: -1, 0 or +1; ``signed_square(v)``: v |v|;
 * ``zeros_like(v)``: zero(s) of v's shape; ``copy(v)``: an independent copy of v;
-* ``take(table, index)``: ``table[index]`` for a whole-number ``index`` (a float or float array);
 * ``all_finite(values)``: whether every value of a sequence (of floats or arrays) is finite;
 * ``finite_each(values)``: per vehicle, whether all its values in the sequence are finite;
-* ``any(condition)``, ``all(condition)``: whether the condition holds for any, every vehicle (a plain bool);
-* ``project(values, limit)``: the list ``values`` with each value clipped to [-limit, limit].
+* ``any(condition)``, ``all(condition)``: whether the condition holds for any, every vehicle (a plain bool).
 
 A single vehicle runs on plain floats because numpy's per-call overhead (a microsecond) is far
 larger than the arithmetic of one vehicle; a batch pays that overhead once for every vehicle.
 
 The hot equations (model, frames, mixer, eq. 10, filters, failure rules, the NNIT2FSMC law) are
 compiled kernels instead (numba), written once with ``numpy`` functions, which numba builds for
-floats and for arrays alike; :func:`select` and :func:`every` are the two primitives above that
-they need in a form numba compiles for both (a plain bool or a bool array).
+floats and for arrays alike; :func:`select` and :func:`every` are ``where`` and ``all`` above in a
+form numba also compiles, for a plain bool and for a bool array.
 """
 from __future__ import annotations
 
@@ -44,34 +42,25 @@ def _sign(value: float) -> float:
     return 1.0 if value > 0.0 else -1.0 if value < 0.0 else 0.0
 
 
-def _project(values: list, limit: float) -> list:
-    if -limit <= min(values) and max(values) <= limit:    # the common case: two C calls, no copy
-        return values
-    return [-limit if v < -limit else limit if v > limit else v for v in values]
-
-
 def _batch_all_finite(values) -> bool:
     return all(bool(np.isfinite(v).all()) for v in values)
 
 
 SCALAR = SimpleNamespace(
-    sin=math.sin, cos=math.cos, asin=math.asin, atan=math.atan, atan2=math.atan2, tanh=math.tanh, hypot=math.hypot,
-    sqrt=math.sqrt, exp=math.exp, expm1=math.expm1, abs=abs, floor=math.floor, minimum=min, maximum=max,
+    sin=math.sin, cos=math.cos, atan2=math.atan2, hypot=math.hypot,
+    sqrt=math.sqrt, exp=math.exp, expm1=math.expm1, abs=abs, minimum=min, maximum=max,
     clip=_clip, where=_where, sign=_sign, signed_square=lambda v: v * abs(v),
-    take=lambda table, index: table[int(index)],
-    all_finite=lambda values: all(map(math.isfinite, values)), project=_project,
+    all_finite=lambda values: all(map(math.isfinite, values)),
     finite_each=lambda values: all(map(math.isfinite, values)), any=bool, all=bool,
     zeros_like=lambda v: 0.0, copy=lambda v: v)
 BATCH = SimpleNamespace(
-    sin=np.sin, cos=np.cos, asin=np.arcsin, atan=np.arctan, atan2=np.arctan2, tanh=np.tanh, hypot=np.hypot,
-    sqrt=np.sqrt, exp=np.exp, expm1=np.expm1, abs=np.abs, floor=np.floor, minimum=np.minimum, maximum=np.maximum,
+    sin=np.sin, cos=np.cos, atan2=np.arctan2, hypot=np.hypot,
+    sqrt=np.sqrt, exp=np.exp, expm1=np.expm1, abs=np.abs, minimum=np.minimum, maximum=np.maximum,
     clip=lambda v, low, high: np.minimum(np.maximum(v, low), high), where=np.where, sign=np.sign,
     signed_square=lambda v: v * np.abs(v),
-    take=lambda table, index: np.asarray(table)[np.asarray(index).astype(np.intp)],
     all_finite=_batch_all_finite,
     finite_each=lambda values: np.logical_and.reduce([np.isfinite(v) for v in values]),
     any=lambda condition: bool(np.any(condition)), all=lambda condition: bool(np.all(condition)),
-    project=lambda values, limit: [np.minimum(np.maximum(v, -limit), limit) for v in values],
     zeros_like=np.zeros_like, copy=np.copy)
 
 
@@ -93,9 +82,7 @@ def is_batch(value) -> bool:
 def select(condition, if_true, if_false):
     """``if_true`` where ``condition`` holds, else ``if_false``: a float for a plain bool, an array (elementwise)
     for a bool array. Also inside compiled kernels (numba), for the kernels that serve a vehicle and a batch."""
-    if isinstance(condition, np.ndarray):
-        return np.where(condition, if_true, if_false)
-    return if_true if condition else if_false
+    return namespace_for(condition).where(condition, if_true, if_false)
 
 
 @overload(select)
@@ -107,7 +94,7 @@ def _select_compiled(condition, if_true, if_false):
 
 def every(condition) -> bool:
     """Whether ``condition`` holds for every vehicle (a plain bool, or a bool array); also in compiled kernels."""
-    return bool(np.all(condition))
+    return namespace_for(condition).all(condition)
 
 
 @overload(every)
