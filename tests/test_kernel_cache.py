@@ -13,9 +13,11 @@ import sys
 from pathlib import Path
 
 import pytest
+from numba.core import caching
 from numba.core.caching import NullCache
 from numba.core.registry import CPUDispatcher
 
+from nnit2fsmc_controller import axis_laws
 from quad_msgs_bridge import kernel_cache
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -47,6 +49,22 @@ def test_every_cached_kernel_of_the_stack_is_stamped_with_its_modules_import_clo
                 assert locator.get_source_stamp()[1] == kernel_cache.closure_stamp(name)
                 kernels += 1
     assert kernels >= 50
+
+
+def test_a_read_only_install_is_cached_in_numbas_user_wide_folder_with_the_same_stamp(tmp_path, monkeypatch):
+    """Where ``__pycache__`` is not writable (an install in a system folder), numba's next choice, its
+    user-wide cache folder, is taken, as numba itself would; the stamp still covers the import closure."""
+    def read_only(locator):
+        raise PermissionError('read-only file system')
+
+    monkeypatch.setattr(caching.InTreeCacheLocator, 'ensure_cache_path', read_only)
+    monkeypatch.setattr(caching.config, 'CACHE_DIR', '')
+    monkeypatch.setenv('XDG_CACHE_HOME', str(tmp_path))
+    law = axis_laws.nnit2fsmc_step
+    locator = kernel_cache.StackSourceLocator.from_function(law.py_func, axis_laws.__file__)
+    assert Path(locator.get_cache_path()).is_relative_to(tmp_path / 'numba')
+    assert locator.get_source_stamp()[1] == kernel_cache.closure_stamp('nnit2fsmc_controller.axis_laws')
+    assert locator.get_disambiguator() == str(law.py_func.__code__.co_firstlineno)
 
 
 def test_a_function_outside_the_stack_keeps_numbas_own_locator():
