@@ -24,8 +24,8 @@ not grow. Every other function numba caches keeps numba's own locators. (``NUMBA
 when set, replaces numba's list, and this locator with it.)
 
 Price: once per process, each stack module a kernel module reaches is read, hashed and its import lines
-parsed (about 30 ms for the 27 modules a flight reaches); after an edit, the kernels that reach the edited module compile again (docs/PAPER.md
-section 5 has the figures).
+parsed (about 30 ms for the 27 modules a flight reaches); after an edit, the kernels that reach the edited
+module compile again (docs/PAPER.md section 5 has the figures).
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ from numba.core.caching import CacheImpl, _CacheLocator
 #: the top-level packages whose kernels are stamped with their import closure (they import each other)
 STACK_PACKAGES = ('quad_msgs_bridge', 'quad_sim', 'nnit2fsmc_controller', 'flight_stack')
 
-_package_roots: dict[str, Path] = {}
+_package_roots: dict[str, Path] = {}   #: top-level package -> its folder, once found
 
 
 def _package_root(top: str) -> Path | None:
@@ -177,5 +177,6 @@ class StackSourceLocator(_CacheLocator):
         return self._numba_locator.get_source_stamp(), self._closure_stamp
 
 
+# Registered once, when this module is first imported (before any kernel of the stack is defined).
 if StackSourceLocator not in CacheImpl._locator_classes:
     CacheImpl._locator_classes.insert(0, StackSourceLocator)
