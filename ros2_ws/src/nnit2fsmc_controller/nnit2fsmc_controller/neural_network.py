@@ -41,6 +41,7 @@ from typing import Sequence
 import numpy as np
 from numba import njit
 
+import quad_msgs_bridge.kernel_cache  # noqa: F401  (the cache stamps of the kernels below)
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 MODIFICATIONS = ('none', 'sigma', 'e')   #: leakage of the learning law (module docstring)

@@ -29,6 +29,8 @@ import numpy as np
 from numba import types
 from numba.extending import overload
 
+import quad_msgs_bridge.kernel_cache  # noqa: F401  (every kernel module imports this module: its kernels' cache stamps)
+
 
 def _clip(value: float, low: float, high: float) -> float:
     return low if value < low else high if value > high else value
