@@ -45,6 +45,10 @@ def disturbances_label(enabled: bool) -> str:
     return 'enabled' if enabled else 'disabled'
 
 
+#: custom data keys of a flight that failed: why (flight_stack.closed_loop.FAILURES) and when [s, sim time]
+FAILURE_KEY, FAILURE_TIME_KEY = 'failure', 'failure_time_s'
+
+
 def flight_custom_data(params: VehicleParams, settle_time: float, **info) -> dict[str, str]:
     """Bag custom data of a flight: vehicle parameters (JSON), settle time [s] and labels (controller, ...)."""
     return {'vehicle': json.dumps(dataclasses.asdict(params)), 'settle_time_s': repr(float(settle_time)),
@@ -127,6 +131,11 @@ class FlightBag:
             write(self._reference, self._encode_pose(sec, nanosec, reference_position, reference_yaw), stamp)
         if self._diagnostics:
             write(self._diagnostics, self._encode_diagnostics(surfaces, equivalent, corrective, slopes), stamp)
+
+    def record_failure(self, reason: str, time_s: float) -> None:
+        """Note that the flight failed (``reason``, e.g. 'flipped over') at sim time ``time_s`` [s]: custom
+        data FAILURE_KEY and FAILURE_TIME_KEY, written when the bag closes, so its review says so."""
+        self.writer.custom_data.update({FAILURE_KEY: str(reason), FAILURE_TIME_KEY: repr(float(time_s))})
 
     def close(self) -> None:
         self.writer.close()
