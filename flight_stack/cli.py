@@ -13,7 +13,7 @@ complete run: its summary, bag and report are kept in OUT.
 
 Examples:
   python3 run_stack.py                                   # the paper's flight, NNIT2FSMC
-  python3 run_stack.py --controller smc-sign --no-disturbances --out out/sign
+  python3 run_stack.py --controller smc-sign --out out/sign   # same disturbances, to compare
   python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
 Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
