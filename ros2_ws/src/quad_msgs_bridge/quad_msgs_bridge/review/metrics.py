@@ -81,6 +81,7 @@ def fuzzy_share(record: FlightRecord, window: float) -> dict[str, list[float]]:
     """
     edges = np.arange(record.time[0], record.time[-1] + window, window)
     index = np.searchsorted(record.time, edges)
+    index[-1] = len(record.time)          # the last window holds the last step, also one at its very edge
     shares = {}
     for k, name in enumerate(SUBSYSTEMS):
         corrective = np.abs(record.corrective[:, k])
