@@ -67,7 +67,7 @@ def _share_lines(summary: dict) -> list[str]:
     lines = [f'  fuzzy share per {summary["fuzzy_share_window_s"]:g} s window (first; after settling: min, max, '
                  'largest rise, last):']
     for axis, extremes in settled.items():
-        lines.append(f'    {axis:<6s} {describe_share(extremes)}' if extremes else f'    {axis:<6s} no window after settling')
+        lines.append(f'    {axis:<6s} ' + describe_share(extremes, summary['fuzzy_share'][axis]))
     return lines
 
 

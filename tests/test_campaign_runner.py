@@ -146,6 +146,9 @@ def test_replay_flies_one_flight_on_the_embedded_path_with_its_row_s_metrics(ref
         for i in range(1, 5):
             assert summary['chattering'][f'U{i}'] == pytest.approx(row[f'chattering_U{i}'], rel=1e-9, abs=1e-12)
         assert (target / 'bag' / 'metadata.yaml').exists() and (target / 'report.html').exists()
+    report = (target / 'report.md').read_text()    # why and when it failed, and what was flown, from its bag
+    assert 'result: FAILED: position error above max_error at ' in report and 'not recorded' not in report
+    assert 'NN seed: 0' in report and f'campaign seed: {spec.seed}' in report and 'campaign flight: 0' in report
         review = json.loads((target / 'review.json').read_text())[0]
         assert review['rmse_position_m'] == pytest.approx(summary['rmse_position_m'], rel=1e-12)
     assert status == (0 if all(rows[(3, c)]['finished'] for c in ('nnit2fsmc', 'pid')) else 1)

@@ -44,10 +44,12 @@ METRIC_MEANINGS = (
 )
 
 
-def describe_share(extremes: dict) -> str:
+def describe_share(extremes: dict | None, shares: list[float]) -> str:
     """'0.91; min 0.04 at 50-55 s, max 0.76 at 5-10 s, rises 0.05 (20-25 s) -> 0.67 (35-40 s), last 0.19 at
     55-60 s': one subsystem's :func:`~quad_msgs_bridge.review.metrics.share_extremes` (times from the
-    flight's first step)."""
+    flight's first step); for a flight too short for a window after settling, the first of its ``shares``."""
+    if extremes is None:
+        return f'{shares[0]:.2f}; no window starts after settling' if shares else '-'
     def span(window: dict) -> str:
         return f'{window["from_s"]:g}-{window["to_s"]:.4g} s'
 
@@ -63,8 +65,7 @@ def describe_share(extremes: dict) -> str:
 def _share(metrics: dict, axis: str) -> str:
     if metrics['fuzzy_share'] is None:
         return 'n/a'
-    extremes = metrics['fuzzy_share_settled'][axis]
-    return describe_share(extremes) if extremes else 'no window after settling'
+    return describe_share(metrics['fuzzy_share_settled'][axis], metrics['fuzzy_share'][axis])
 
 
 def describe_result(metrics: dict) -> str:
