@@ -196,6 +196,7 @@ class Flown:
     flight: object = None           #: quad_msgs_bridge.review.flight_from_bag.BagFlight, None without a bag
     extra: dict = field(default_factory=dict)
     failure: str | None = None      #: why the flight ended early (flight_stack.closed_loop.FAILURES), if it did
+    failure_time_s: float | None = None   #: [s] sim time at which it failed
 
 
 def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_server=None,
@@ -224,7 +225,8 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
                 sink.close()
     flight = (BagFlight(bag_shown, plan.controller, result.record, plan.params, plan.settle_time,
                         dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
-    return Flown(result.record, result.wall_time_s, flight, failure=result.failure)
+    return Flown(result.record, result.wall_time_s, flight, failure=result.failure,
+                 failure_time_s=result.failure_time_s)
 
 
 def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list[tuple[str, Flown]]:
@@ -254,7 +256,8 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
         flight = (BagFlight(bag_shown, vehicle.namespace, result.record, plan.params, plan.settle_time,
                             dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
         flights.append((vehicle.namespace, Flown(result.record, result.wall_time_s, flight,
-                                                 {'offset_m': list(vehicle.offset)}, failure=result.failure)))
+                                                 {'offset_m': list(vehicle.offset)}, failure=result.failure,
+                                                 failure_time_s=result.failure_time_s)))
     return flights
 
 
@@ -403,7 +406,8 @@ def summarize(flown: Flown, plan, backend: str) -> dict:
     summary = build_summary(flown.record, backend=backend, controller=plan.controller, scenario=plan.scenario,
                             seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
                             disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
-                            wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure)
+                            wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure,
+                            failure_time_s=flown.failure_time_s)
     summary.update(flown.extra)
     return summary
 

@@ -18,10 +18,11 @@ def build_summary(record: FlightRecord, *, backend: str, controller: str, scenar
     """Metrics of the flight plus everything needed to reproduce it.
 
     ``flight_ok`` is false when the flight ended early (``failure``: why, see
-    flight_stack.closed_loop.FAILURES, at sim time ``failure_time_s`` [s], by default the record's
-    last step, where it ended), a state or force went non-finite or the largest position error after
-    the settling window exceeds ``max_error`` [m]; ``failures`` says which, ``failure`` and
-    ``failure_time_s`` why and when it ended early (None if it did not).
+    flight_stack.closed_loop.FAILURES, at sim time ``failure_time_s`` [s], as the flight result and
+    the bag give it; without it, the time of the record's last step), a state or force went
+    non-finite or the largest position error after the settling window exceeds ``max_error`` [m];
+    ``failures`` says which, ``failure`` and ``failure_time_s`` why and when it ended early (None if
+    it did not).
     """
     metrics = flight_metrics(record, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
                              ended_early=failure is not None, arm_length=params.d)
