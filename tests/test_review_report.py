@@ -169,7 +169,8 @@ def test_the_campaign_plots_explain_a_controller_without_finished_flight_and_tit
     assert titles == [parameter_title(name) for name in SAMPLED_COLUMNS]
     assert 'mass [kg]' in titles and 'rotor 1 thrust factor Kp [N s^2]' in titles and 'Kp1_Nss' not in titles
     for ax in failure.axes:              # no two x tick labels of a panel overlap
-        boxes = [label.get_window_extent() for label in ax.get_xticklabels() if label.get_visible() and label.get_text()]
+        boxes = [label.get_window_extent() for label in ax.get_xticklabels()
+                 if label.get_visible() and label.get_text()]
         assert all(a.x1 < b.x0 for a, b in zip(boxes, boxes[1:])), ax.get_title()
 
     boxes = [text.get_text() for ax in figures['boxplots.png'].axes for text in ax.texts]
