@@ -236,7 +236,7 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
     from flight_stack.embedded import fly_fleet
     from flight_stack.fleet import fleet_layout
     from nnit2fsmc_controller.trajectory import make_scenario
-    from quad_msgs_bridge.bag.flight_bag import FleetBag, disturbances_label
+    from quad_msgs_bridge.bag.flight_bag import FleetBag, disturbances_label, vehicle_custom_data
     from quad_msgs_bridge.review.flight_from_bag import BagFlight
 
     vehicles = fleet_layout(args.vehicles, args.namespace)
@@ -254,7 +254,8 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
     flights = []
     for vehicle, result in zip(vehicles, results):
         flight = (BagFlight(bag_shown, vehicle.namespace, result.record, plan.params, plan.settle_time,
-                            dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
+                            vehicle_custom_data(written.writer.custom_data, vehicle.namespace),
+                            ended_early=result.failure is not None) if bag else None)
         flights.append((vehicle.namespace, Flown(result.record, result.wall_time_s, flight,
                                                  {'offset_m': list(vehicle.offset)}, failure=result.failure,
                                                  failure_time_s=result.failure_time_s)))

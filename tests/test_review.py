@@ -253,3 +253,32 @@ def test_a_flight_that_failed_before_settling_is_recorded_as_failed_and_reviewed
     assert f'result: FAILED: position error above max_error at {when} s' in report
     [saved] = json.loads((tmp_path / 'review' / 'review.json').read_text())
     assert saved['failure'] == result.failure and saved['rmse_position_m'] != saved['rmse_position_m']   # NaN
+
+
+def test_each_vehicle_of_a_fleet_bag_records_its_own_failure(tmp_path):
+    """A fleet's bag holds each failed vehicle's reason and time under keys of its own namespace; the review of
+    the fleet's bag gives every vehicle its failure."""
+    from flight_stack.closed_loop import FailureRules
+    from flight_stack.embedded import fly_fleet
+    from flight_stack.fleet import fleet_layout
+    from nnit2fsmc_controller.factory import load_gains
+    from nnit2fsmc_controller.trajectory import make_scenario
+    from quad_msgs_bridge.bag.flight_bag import FleetBag
+    from quad_msgs_bridge.bag.reader import read_custom_data
+    from bag_support import DISTURBANCES
+    vehicles = fleet_layout(2)
+    namespaces = [v.namespace for v in vehicles]
+    bag = tmp_path / 'bag'
+    with FleetBag.create(bag, PARAMS, SETTLE_TIME, namespaces, controller='nnit2fsmc', scenario='paper',
+                         backend='embedded', seed=0, disturbances='enabled') as recording:
+        results = fly_fleet('nnit2fsmc', [make_scenario('paper', 2.0, offset=v.offset) for v in vehicles], PARAMS,
+                            DISTURBANCES, load_gains(), 2.0, 1000.0, bag=recording,
+                            rules=FailureRules(settle_time=SETTLE_TIME, max_error=1e-6))
+    custom = read_custom_data(bag)
+    assert 'failure' not in custom
+    for namespace, result in zip(namespaces, results):
+        assert custom[f'failure:{namespace}'] == result.failure == 'position error above max_error'
+        assert float(custom[f'failure_time_s:{namespace}']) == result.failure_time_s
+    review = review_bags([bag], tmp_path / 'review', plots=False)
+    assert [m['failure'] for m in review.metrics] == ['position error above max_error'] * 2
+    assert [f.label for f in review.flights] == namespaces

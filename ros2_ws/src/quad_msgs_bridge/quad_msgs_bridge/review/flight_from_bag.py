@@ -16,7 +16,7 @@ from pathlib import Path
 
 from rosbags.highlevel import AnyReader, AnyReaderError
 
-from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, FAILURE_TIME_KEY
+from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, FAILURE_TIME_KEY, vehicle_custom_data
 from quad_msgs_bridge.bag.reader import BagReadError, check_bag_path, is_finalized, mcap_file, read_custom_data
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (ALL_TOPICS, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GROUND_TRUTH,
@@ -194,6 +194,7 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     params = _vehicle(custom, vehicle_file, warnings)
     if namespace is None:
         namespace = custom.get('namespace')
+    custom = vehicle_custom_data(custom, namespace)
     record = _flight_record(_read_topics(bag, namespace, params.d), warnings)
     if record is None:
         raise BagReadError(f'{bag}: no complete control step')
