@@ -61,13 +61,13 @@ def write_summary(summary: dict, out_dir: Path) -> Path:
 
 
 def _share_lines(summary: dict) -> list[str]:
-    """The fuzzy share per subsystem: its first window, then its lowest, highest and last window after settling."""
-    settled = summary.get('fuzzy_share_settled')
-    if summary['fuzzy_share'] is None or settled is None:
+    """The fuzzy share per subsystem: its first window, then after settling its lowest and highest window, its
+    largest rise and its last window (see quad_msgs_bridge.review.metrics.share_extremes)."""
+    if summary['fuzzy_share'] is None:
         return [f'  fuzzy share: n/a ({summary["controller"]} has no fuzzy term)']
     lines = [f'  fuzzy share per {summary["fuzzy_share_window_s"]:g} s window (first; after settling: min, max, '
                  'largest rise, last):']
-    for axis, extremes in settled.items():
+    for axis, extremes in summary['fuzzy_share_settled'].items():
         lines.append(f'    {axis:<6s} ' + describe_share(extremes, summary['fuzzy_share'][axis]))
     return lines
 
