@@ -13,7 +13,7 @@ complete run: its summary, bag and report are kept in OUT.
 
 Examples:
   python3 run_stack.py                                   # the paper's flight, NNIT2FSMC
-  python3 run_stack.py --controller smc-sign --no-disturbances --out out/sign
+  python3 run_stack.py --controller smc-sign --out out/sign   # same disturbances, to compare
   python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
 Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
@@ -196,6 +196,7 @@ class Flown:
     flight: object = None           #: quad_msgs_bridge.review.flight_from_bag.BagFlight, None without a bag
     extra: dict = field(default_factory=dict)
     failure: str | None = None      #: why the flight ended early (flight_stack.closed_loop.FAILURES), if it did
+    failure_time_s: float | None = None   #: [s] sim time at which it failed
 
 
 def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_server=None,
@@ -224,7 +225,8 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
                 sink.close()
     flight = (BagFlight(bag_shown, plan.controller, result.record, plan.params, plan.settle_time,
                         dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
-    return Flown(result.record, result.wall_time_s, flight, failure=result.failure)
+    return Flown(result.record, result.wall_time_s, flight, failure=result.failure,
+                 failure_time_s=result.failure_time_s)
 
 
 def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list[tuple[str, Flown]]:
@@ -234,7 +236,7 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
     from flight_stack.embedded import fly_fleet
     from flight_stack.fleet import fleet_layout
     from nnit2fsmc_controller.trajectory import make_scenario
-    from quad_msgs_bridge.bag.flight_bag import FleetBag, disturbances_label
+    from quad_msgs_bridge.bag.flight_bag import FleetBag, disturbances_label, vehicle_custom_data
     from quad_msgs_bridge.review.flight_from_bag import BagFlight
 
     vehicles = fleet_layout(args.vehicles, args.namespace)
@@ -252,9 +254,11 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
     flights = []
     for vehicle, result in zip(vehicles, results):
         flight = (BagFlight(bag_shown, vehicle.namespace, result.record, plan.params, plan.settle_time,
-                            dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
+                            vehicle_custom_data(written.writer.custom_data, vehicle.namespace),
+                            ended_early=result.failure is not None) if bag else None)
         flights.append((vehicle.namespace, Flown(result.record, result.wall_time_s, flight,
-                                                 {'offset_m': list(vehicle.offset)}, failure=result.failure)))
+                                                 {'offset_m': list(vehicle.offset)}, failure=result.failure,
+                                                 failure_time_s=result.failure_time_s)))
     return flights
 
 
@@ -403,7 +407,8 @@ def summarize(flown: Flown, plan, backend: str) -> dict:
     summary = build_summary(flown.record, backend=backend, controller=plan.controller, scenario=plan.scenario,
                             seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
                             disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
-                            wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure)
+                            wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure,
+                            failure_time_s=flown.failure_time_s)
     summary.update(flown.extra)
     return summary
 

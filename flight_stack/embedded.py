@@ -134,6 +134,8 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
         if progress and (k + 1) % report_every == 0:
             print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
     failure = None if loop.flying else FAILURES[loop.failure]
+    if bag is not None and failure is not None:
+        bag.record_failure(failure, float(loop.failure_time))
     return FlightResult(recorder.record(), time.perf_counter() - started, len(recorder.rows), failure,
                         None if loop.flying else float(loop.failure_time))
 
@@ -216,6 +218,9 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
             if progress and (k + 1) % report_every == 0:
                 print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
     wall = time.perf_counter() - started
+    for v in range(count):
+        if bag is not None and loop.failure[v] >= 0:
+            bag.vehicles[v].record_failure(FAILURES[loop.failure[v]], float(loop.failure_time[v]))
     return [FlightResult(recorder.record(), wall, len(recorder.rows),
                          None if loop.failure[v] < 0 else FAILURES[loop.failure[v]],
                          None if loop.failure[v] < 0 else float(loop.failure_time[v]))

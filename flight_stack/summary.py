@@ -6,23 +6,30 @@ import json
 from pathlib import Path
 
 from quad_msgs_bridge.review.metrics import FlightRecord, flight_metrics, has_fuzzy_term
+from quad_msgs_bridge.review.report import describe_share
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 
 def build_summary(record: FlightRecord, *, backend: str, controller: str, scenario: str, seed: int,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
-                  physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None) -> dict:
+                  physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None,
+                  failure_time_s: float | None = None) -> dict:
     """Metrics of the flight plus everything needed to reproduce it.
 
     ``flight_ok`` is false when the flight ended early (``failure``: why, see
-    flight_stack.closed_loop.FAILURES), a state or force went non-finite or the largest position
-    error after the settling window exceeds ``max_error`` [m]; ``failures`` says which.
+    flight_stack.closed_loop.FAILURES, at sim time ``failure_time_s`` [s], as the flight result and
+    the bag give it; without it, the time of the record's last step), a state or force went
+    non-finite or the largest position error after the settling window exceeds ``max_error`` [m];
+    ``failures`` says which, ``failure`` and ``failure_time_s`` why and when it ended early (None if
+    it did not).
     """
     metrics = flight_metrics(record, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
-                             ended_early=failure is not None)
+                             ended_early=failure is not None, arm_length=params.d)
     sim_time = metrics['duration_s']
-    failures = [] if failure is None else [f'the flight ended early: {failure}']
+    if failure is not None and failure_time_s is None:
+        failure_time_s = float(record.time[-1])
+    failures = [] if failure is None else [f'the flight ended early: {failure} at {failure_time_s:.3f} s']
     if not metrics['all_finite']:
         failures.append('non-finite state or rotor force')
     if metrics['max_position_error_m'] > max_error:
@@ -31,6 +38,8 @@ def build_summary(record: FlightRecord, *, backend: str, controller: str, scenar
         **metrics,
         'flight_ok': not failures,
         'failures': failures,
+        'failure': failure,
+        'failure_time_s': failure_time_s,
         'backend': backend,
         'controller': controller,
         'scenario': scenario,
@@ -51,14 +60,23 @@ def write_summary(summary: dict, out_dir: Path) -> Path:
     return path
 
 
+def _share_lines(summary: dict) -> list[str]:
+    """The fuzzy share per subsystem: its first window, then after settling its lowest and highest window, its
+    largest rise and its last window (see quad_msgs_bridge.review.metrics.share_extremes)."""
+    if summary['fuzzy_share'] is None:
+        return [f'  fuzzy share: n/a ({summary["controller"]} has no fuzzy term)']
+    lines = [f'  fuzzy share per {summary["fuzzy_share_window_s"]:g} s window (first; after settling: min, max, '
+                 'largest rise, last):']
+    for axis, extremes in summary['fuzzy_share_settled'].items():
+        lines.append(f'    {axis:<6s} ' + describe_share(extremes, summary['fuzzy_share'][axis]))
+    return lines
+
+
 def format_summary(summary: dict) -> str:
     """A short human-readable table of the main figures."""
     chattering = '  '.join(f'{name} {summary["chattering"][name]:.3g} {unit}/s'
                            for name, unit in zip(CONTROL_NAMES, CONTROL_UNITS))
-    shares = summary['fuzzy_share']
-    share_line = (f'  fuzzy share (first -> last {summary["fuzzy_share_window_s"]:g} s window): '
-                  + '  '.join(f'{axis} {values[0]:.2f}->{values[-1]:.2f}' for axis, values in shares.items() if values)
-                  if shares is not None else f'  fuzzy share: n/a ({summary["controller"]} has no fuzzy term)')
+    moment = summary.get('chattering_moment_nm_per_s')
     rtf = summary.get('real_time_factor')
     lines = [
         f'flight: {summary["controller"]} on "{summary["scenario"]}" ({summary["backend"]} backend), '
@@ -68,10 +86,12 @@ def format_summary(summary: dict) -> str:
         f'    position RMSE     {summary["rmse_position_m"] * 100:8.3f} cm',
         f'    max position err  {summary["max_position_error_m"] * 100:8.3f} cm',
         f'    yaw RMSE          {summary["rmse_yaw_rad"]:8.5f} rad',
-        f'    chattering        {chattering}',
+        f'    chattering        force (U1) {summary["chattering_force_n_per_s"]:.3g} N/s, moments (d U2, d U3, U4) '
+        + ('n/a' if moment is None else f'{moment:.3g} N m/s'),
+        f'      per channel     {chattering}',
         f'    rotor saturation  {summary["saturation_fraction"] * 100:.2f} % of steps '
         f'({summary["saturation_fraction_whole_flight"] * 100:.2f} % over the whole flight)',
-        share_line,
+        *_share_lines(summary),
         '  result: ' + ('OK' if summary['flight_ok'] else 'FAILED: ' + '; '.join(summary['failures'])),
     ]
     return '\n'.join(lines)

@@ -49,5 +49,6 @@ def fly_recorded(bag: Path, duration: float = 2.0, controller: str = 'nnit2fsmc'
                                    disturbances=disturbances_label(DISTURBANCES.enabled)) as recording:
         result = fly_embedded(controller, make_scenario('paper'), PARAMS, DISTURBANCES, load_gains(), duration,
                               1000.0, bag=recording)
-    metrics = flight_metrics(result.record, SETTLE_TIME, PARAMS.F_min, PARAMS.F_max, fuzzy_term=has_fuzzy_term(controller))
+    metrics = flight_metrics(result.record, SETTLE_TIME, PARAMS.F_min, PARAMS.F_max, fuzzy_term=has_fuzzy_term(controller),
+                             arm_length=PARAMS.d)
     return RecordedFlight(bag, result, recording, metrics)

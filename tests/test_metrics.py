@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from quad_msgs_bridge.review.metrics import (FlightRecord, StatisticsAccumulator, flight_metrics,
+from quad_msgs_bridge.review.metrics import (FlightRecord, StatisticsAccumulator, flight_metrics, share_extremes,
                                              tracking_metrics)
 
 F_MIN, F_MAX = 0.0, 2.5      # [N]
@@ -101,3 +101,43 @@ def test_a_rotor_just_inside_its_limits_is_not_saturated():
     record.forces[:] = [F_MIN + 1e-6, 1.0, 1.0, F_MAX - 1e-6]
     metrics = flight_metrics(record, SETTLE, F_MIN, F_MAX, fuzzy_term=False)
     assert metrics['saturation_fraction'] == 0.0 and metrics['saturation_fraction_whole_flight'] == 0.0
+
+
+def test_chattering_is_split_into_the_force_channel_and_the_moment_channels():
+    """Force: TV(U1)/s [N/s]. Moments: TV(d U2)/s + TV(d U3)/s + TV(U4)/s [N m/s] with the arm length d, never
+    the N/s of U1 added to the N m/s of U4."""
+    arm = 0.25    # [m]
+    metrics = flight_metrics(synthetic_record(), SETTLE, F_MIN, F_MAX, fuzzy_term=False, arm_length=arm)
+    assert metrics['chattering_force_n_per_s'] == pytest.approx(CHATTERING['U1'], rel=1e-12)
+    moment = arm * (CHATTERING['U2'] + CHATTERING['U3']) + CHATTERING['U4']     # 0.25 * 0.75 + 0.02 N m/s
+    assert metrics['chattering_moment_nm_per_s'] == pytest.approx(moment, rel=1e-12)
+    assert metrics['chattering_moment_nm_per_s'] != pytest.approx(sum(CHATTERING.values()) - CHATTERING['U1'])
+    assert flight_metrics(synthetic_record(), SETTLE, F_MIN, F_MAX, fuzzy_term=False)['chattering_moment_nm_per_s'] \
+        is None   # without the arm length there is no moment figure, rather than a wrong one
+
+
+def test_the_fuzzy_share_after_settling_reports_its_rise_back_with_times():
+    """A share that falls to 0.05 at 15-20 s and climbs back to 0.67 at 25-30 s is not summarised as 0.9 -> 0.2."""
+    shares = [0.9, 0.7, 0.3, 0.05, 0.3, 0.67, 0.2]          # 5 s windows of a 34 s flight
+    extremes = share_extremes(shares, 5.0, settle_time=5.0, duration=34.0)
+    assert extremes['first'] == 0.9
+    assert extremes['min'] == {'value': 0.05, 'from_s': 15.0, 'to_s': 20.0}
+    assert extremes['max'] == {'value': 0.7, 'from_s': 5.0, 'to_s': 10.0}
+    assert extremes['rise'] == {'from': {'value': 0.05, 'from_s': 15.0, 'to_s': 20.0},
+                                'to': {'value': 0.67, 'from_s': 25.0, 'to_s': 30.0}}
+    assert extremes['last'] == {'value': 0.2, 'from_s': 30.0, 'to_s': 34.0}
+    assert share_extremes([0.9, 0.5, 0.3], 5.0, settle_time=5.0, duration=15.0)['rise'] is None   # only falls
+    assert share_extremes([0.9], 5.0, settle_time=5.0, duration=5.0) is None                     # never settled
+
+
+def test_flight_metrics_give_the_fuzzy_share_after_settling_per_subsystem():
+    record = synthetic_record()
+    record.equivalent, record.corrective = np.ones((5, 6)), np.zeros((5, 6))
+    record.corrective[:, 0] = [3.0, 3.0, 0.0, 1.0, 3.0]
+    # x in 1 s windows: 0.75, 0.75, 0 and, the last window holding the steps at 3 s and 4 s, (1 + 3) / (2 + 4)
+    metrics = flight_metrics(record, SETTLE, F_MIN, F_MAX, share_window=1.0)
+    assert metrics['fuzzy_share']['x'] == pytest.approx([0.75, 0.75, 0.0, 4.0 / 6.0])
+    x = metrics['fuzzy_share_settled']['x']
+    assert x['min'] == {'value': 0.0, 'from_s': 2.0, 'to_s': 3.0}
+    assert x['rise']['to'] == {'value': pytest.approx(4.0 / 6.0), 'from_s': 3.0, 'to_s': 4.0}
+    assert x['first'] == 0.75

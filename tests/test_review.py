@@ -210,7 +210,7 @@ def test_the_report_says_what_was_flown_and_what_each_metric_means(flights, tmp_
                  'backend: embedded', 'NN seed: 0'):
         assert fact in report, fact
     assert '## Metrics' in report and '### What the metrics mean' in report
-    for metric in ('settle time', 'position RMSE', 'max position error', 'yaw RMSE', 'chattering U1..U4',
+    for metric in ('result', 'settle time', 'position RMSE', 'max position error', 'yaw RMSE', 'chattering',
                    'rotor saturation', 'fuzzy share'):
         assert f'- **{metric}**: ' in report, metric
     html = (tmp_path / 'report.html').read_text()
@@ -223,3 +223,62 @@ def test_a_flight_without_fuzzy_term_has_no_fuzzy_share(flights, tmp_path):
     assert 'fuzzy_share.png' not in {p.name for p in review.plots} and len(review.plots) == len(PLOTS) - 1
     rows = [line for line in (tmp_path / 'report.md').read_text().splitlines() if line.startswith('| fuzzy share')]
     assert len(rows) == 6 and all(row.endswith('| n/a |') for row in rows)
+
+
+def test_a_flight_that_failed_before_settling_is_recorded_as_failed_and_reviewed_from_its_bag(tmp_path, capsys):
+    """The embedded flight writes why and when it failed into the bag (metadata.yaml and the MCAP file's last
+    custom data record); `review BAG` then reviews the flight, NaN tracking figures, and says it failed,
+    instead of refusing the bag as shorter than the settling window."""
+    from flight_stack.closed_loop import FailureRules
+    from flight_stack.embedded import fly_embedded
+    from nnit2fsmc_controller.factory import load_gains
+    from nnit2fsmc_controller.trajectory import make_scenario
+    from quad_msgs_bridge.bag.flight_bag import FlightBag
+    from quad_msgs_bridge.bag.reader import mcap_file, read_custom_data
+    from bag_support import DISTURBANCES
+    bag = tmp_path / 'bag'
+    with FlightBag.create(bag, PARAMS, SETTLE_TIME, controller='nnit2fsmc', scenario='paper', backend='embedded',
+                          seed=0, disturbances='enabled') as recording:
+        result = fly_embedded('nnit2fsmc', make_scenario('paper'), PARAMS, DISTURBANCES, load_gains(), 2.0, 1000.0,
+                              bag=recording, rules=FailureRules(settle_time=SETTLE_TIME, max_error=1e-6))
+    assert result.failure == 'position error above max_error'
+    when = f'{result.failure_time_s:.3f}'
+    for source in (bag, mcap_file(bag)):          # the bag directory and its lone MCAP file
+        custom = read_custom_data(source)
+        assert custom['failure'] == result.failure and float(custom['failure_time_s']) == result.failure_time_s
+    assert review_main([str(bag), '--out', str(tmp_path / 'review'), '--no-plots']) == 0
+    out = capsys.readouterr().out
+    assert f'FAILED: position error above max_error at {when} s' in out
+    report = (tmp_path / 'review' / 'report.md').read_text()
+    assert f'result: FAILED: position error above max_error at {when} s' in report
+    [saved] = json.loads((tmp_path / 'review' / 'review.json').read_text())
+    assert saved['failure'] == result.failure and saved['rmse_position_m'] != saved['rmse_position_m']   # NaN
+
+
+def test_each_vehicle_of_a_fleet_bag_records_its_own_failure(tmp_path):
+    """A fleet's bag holds each failed vehicle's reason and time under keys of its own namespace; the review of
+    the fleet's bag gives every vehicle its failure."""
+    from flight_stack.closed_loop import FailureRules
+    from flight_stack.embedded import fly_fleet
+    from flight_stack.fleet import fleet_layout
+    from nnit2fsmc_controller.factory import load_gains
+    from nnit2fsmc_controller.trajectory import make_scenario
+    from quad_msgs_bridge.bag.flight_bag import FleetBag
+    from quad_msgs_bridge.bag.reader import read_custom_data
+    from bag_support import DISTURBANCES
+    vehicles = fleet_layout(2)
+    namespaces = [v.namespace for v in vehicles]
+    bag = tmp_path / 'bag'
+    with FleetBag.create(bag, PARAMS, SETTLE_TIME, namespaces, controller='nnit2fsmc', scenario='paper',
+                         backend='embedded', seed=0, disturbances='enabled') as recording:
+        results = fly_fleet('nnit2fsmc', [make_scenario('paper', 2.0, offset=v.offset) for v in vehicles], PARAMS,
+                            DISTURBANCES, load_gains(), 2.0, 1000.0, bag=recording,
+                            rules=FailureRules(settle_time=SETTLE_TIME, max_error=1e-6))
+    custom = read_custom_data(bag)
+    assert 'failure' not in custom
+    for namespace, result in zip(namespaces, results):
+        assert custom[f'failure:{namespace}'] == result.failure == 'position error above max_error'
+        assert float(custom[f'failure_time_s:{namespace}']) == result.failure_time_s
+    review = review_bags([bag], tmp_path / 'review', plots=False)
+    assert [m['failure'] for m in review.metrics] == ['position error above max_error'] * 2
+    assert [f.label for f in review.flights] == namespaces

@@ -214,7 +214,8 @@ def test_the_fuzzy_share_has_one_name_and_only_with_a_fuzzy_term(tmp_path, capsy
                                controller, '--out', str(tmp_path / controller)]) == 0
     out = capsys.readouterr().out
     assert 'corrective share' not in out
-    assert 'fuzzy share (first -> last 5 s window): x ' in out
+    assert 'fuzzy share per 5 s window (first; after settling: min, max, largest rise, last):\n    x      0.' in out
+    assert 'no window starts after settling' in out     # 1.5 s: the only window holds the take-off
     assert 'fuzzy share: n/a (smc-sign has no fuzzy term)' in out
     assert json.loads((tmp_path / 'smc-sign' / 'summary.json').read_text())['fuzzy_share'] is None
     assert set(json.loads((tmp_path / 'nnit2fsmc' / 'summary.json').read_text())['fuzzy_share']) == \

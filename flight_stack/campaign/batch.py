@@ -14,7 +14,7 @@ import numpy as np
 
 from nnit2fsmc_controller.factory import build_controller, load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
-from quad_msgs_bridge.review.metrics import tracking_metrics
+from quad_msgs_bridge.review.metrics import chattering_force, chattering_moment, tracking_metrics
 from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 from quad_sim.model import QuadrotorModel
 from quad_sim.simulator import Simulator
@@ -28,7 +28,8 @@ BIAS_COLUMNS = tuple(f'bias_{name}' for name in ('x_m', 'y_m', 'z_m', 'vx_mps', 
                                                  'theta_rad', 'psi_rad', 'p_radps', 'q_radps', 'r_radps'))
 #: the columns of flights.csv, in order
 COLUMNS = ('flight', 'controller', 'finished', 'failure', 'failure_time_s',
-           'rmse_position_m', 'max_position_error_m', 'rmse_yaw_rad', 'chattering_total',
+           'rmse_position_m', 'max_position_error_m', 'rmse_yaw_rad', 'chattering_force_n_per_s',
+           'chattering_moment_nm_per_s',
            'chattering_U1', 'chattering_U2', 'chattering_U3', 'chattering_U4', 'saturation_fraction',
            'control_steps', *SAMPLED_COLUMNS, *BIAS_COLUMNS)
 
@@ -130,13 +131,14 @@ def row(controller: str, conditions: FlightConditions, nominal: VehicleParams, o
     crash, no non-finite state, position error never above max_error after settling). Its metrics
     cover the steps it flew; they are NaN when it failed before two settled steps.
     """
-    chattering = [outcome[f'chattering_U{i}'] for i in range(1, 5)]
+    chattering = {f'U{i}': outcome[f'chattering_U{i}'] for i in range(1, 5)}
     values = {
         'rmse_position_m': outcome['rmse_position_m'],
         'max_position_error_m': outcome['max_position_error_m'],
         'rmse_yaw_rad': outcome['rmse_yaw_rad'],
-        'chattering_total': sum(chattering),
-        **{f'chattering_U{i}': value for i, value in enumerate(chattering, 1)},
+        'chattering_force_n_per_s': chattering_force(chattering),
+        'chattering_moment_nm_per_s': chattering_moment(chattering, nominal.d),
+        **{f'chattering_{name}': value for name, value in chattering.items()},
         'saturation_fraction': outcome['saturation_fraction'],
     }
     if outcome['settled_steps'] < 2:

@@ -86,12 +86,14 @@ def format_table(summary_path: Path) -> str:
     import json
     summary = json.loads(summary_path.read_text())
     lines = [f'{"controller":20s} {"finished":>9s} {"95% interval":>15s} {"RMSE p50":>9s} {"p95":>8s} {"p99":>8s} '
-             f'{"max":>8s} [cm]  {"TV p50":>8s} {"p95":>8s}']
+             f'{"max":>8s} [cm]  {"chattering p50: U1 [N/s]":>24s}  {"moments [N m/s]":>15s}']
     for name, entry in summary['controllers'].items():
-        rmse, tv = entry['rmse_position_m'], entry['chattering_total']
+        rmse = entry['rmse_position_m']
+        force, moment = entry['chattering_force_n_per_s']['p50'], entry['chattering_moment_nm_per_s']['p50']
         low, high = entry['success_rate_wilson95']
         cm = [f'{rmse[k] * 100:8.3f}' if rmse[k] is not None else '       -' for k in ('p50', 'p95', 'p99', 'max')]
-        tvs = [f'{tv[k]:8.3g}' if tv[k] is not None else '       -' for k in ('p50', 'p95')]
+        tvs = [f'{value:.3g}' if value is not None else '-' for value in (force, moment)]
         lines.append(f'{name:20s} {entry["finished"]:4d}/{entry["flights"]:<4d} '
-                     f'{low * 100:6.2f}-{high * 100:6.2f}% {cm[0]} {cm[1]} {cm[2]} {cm[3]}       {tvs[0]} {tvs[1]}')
+                     f'{low * 100:6.2f}-{high * 100:6.2f}% {cm[0]} {cm[1]} {cm[2]} {cm[3]}       '
+                     f'{tvs[0]:>24s}  {tvs[1]:>15s}')
     return '\n'.join(lines)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from quad_msgs_bridge.bag.flight_bag import FlightBag
+from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
 from quad_msgs_bridge.contract import GROUND_TRUTH, RECORDED_TOPICS
 from quad_msgs_bridge.review.command import review_flights
 from quad_msgs_bridge.review.flight_from_bag import BagFlight
@@ -37,6 +37,7 @@ def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOp
     setup = CampaignSetup.of(spec, options.vehicle_file, options.gains_file)
     rows = {(r['flight'], r['controller']): r for r in read_flights(out_dir / FLIGHTS_FILE)}
     status = 0
+    nn_seed = int(setup.gains['nnit2fsmc']['seed'])   # the flights' NN seed (the campaign seed draws the conditions)
     for controller in spec.controllers:
         target = out_dir / f'replay-{flight}' / controller
         conditions = sample_conditions(spec, setup.nominal, flight)
@@ -44,17 +45,19 @@ def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOp
         topics = RECORDED_TOPICS + ((GROUND_TRUTH,) if perturbations.sensor_noise is not None else ())
         print(f'replaying flight {flight} with {controller} -> {target}', file=sys.stderr)
         with FlightBag.create(target / 'bag', setup.nominal, spec.settle_time, topics=topics, overwrite=True,
-                              controller=controller, scenario=spec.scenario, backend='embedded',
+                              controller=controller, scenario=spec.scenario, backend='embedded', seed=nn_seed,
+                              disturbances=disturbances_label(setup.disturbances.enabled),
                               campaign_seed=spec.seed, flight=flight) as bag:
             result = fly_embedded(controller, setup.trajectory, setup.nominal, setup.disturbances, setup.gains,
                                   spec.duration, 1.0 / setup.physics_dt, progress=options.progress, bag=bag,
                                   perturbations=perturbations, rules=setup.rules(spec))
         summary = build_summary(result.record, backend='embedded', controller=controller, scenario=spec.scenario,
-                                seed=spec.seed, settle_time=spec.settle_time, params=setup.nominal,
+                                seed=nn_seed, settle_time=spec.settle_time, params=setup.nominal,
                                 disturbances=setup.disturbances, gains=setup.gains,
                                 physics_rate=1.0 / setup.physics_dt, wall_time_s=result.wall_time_s,
-                                max_error=spec.max_error_m, failure=result.failure)
-        summary['campaign'] = {'flight': flight, 'sampled': conditions.sampled_values(setup.nominal)}
+                                max_error=spec.max_error_m, failure=result.failure,
+                                failure_time_s=result.failure_time_s)
+        summary['campaign'] = {'seed': spec.seed, 'flight': flight, 'sampled': conditions.sampled_values(setup.nominal)}
         write_summary(summary, target)
         # reviewed from the record in memory (what the bag holds), as a single flight is: it knows whether
         # the flight ended early, so one that failed before settling is reviewed, not refused as too short

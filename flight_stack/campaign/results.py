@@ -101,7 +101,8 @@ def _percentiles(values: list[float]) -> dict:
 
 def summarize(rows: list[dict], controllers: Sequence[str]) -> dict:
     """Per controller: success rate with its 95 % Wilson interval, failures by reason, and the
-    percentiles (p50, p95, p99, max) of RMSE, max error and total chattering over finished flights."""
+    percentiles (p50, p95, p99, max) of RMSE, max error and the force [N/s] and moment [N m/s]
+    chattering over finished flights."""
     table = {}
     for controller in controllers:
         mine = [r for r in rows if r['controller'] == controller]
@@ -119,6 +120,7 @@ def summarize(rows: list[dict], controllers: Sequence[str]) -> dict:
             'failures': failures,
             'rmse_position_m': _percentiles([r['rmse_position_m'] for r in finished]),
             'max_position_error_m': _percentiles([r['max_position_error_m'] for r in finished]),
-            'chattering_total': _percentiles([r['chattering_total'] for r in finished]),
+            'chattering_force_n_per_s': _percentiles([r['chattering_force_n_per_s'] for r in finished]),
+            'chattering_moment_nm_per_s': _percentiles([r['chattering_moment_nm_per_s'] for r in finished]),
         }
     return table

@@ -45,6 +45,19 @@ def disturbances_label(enabled: bool) -> str:
     return 'enabled' if enabled else 'disabled'
 
 
+#: custom data keys of a flight that failed: why (flight_stack.closed_loop.FAILURES) and when [s, sim time];
+#: in a fleet's bag each vehicle's are suffixed with ':<namespace>' (see vehicle_custom_data)
+FAILURE_KEY, FAILURE_TIME_KEY = 'failure', 'failure_time_s'
+
+
+def vehicle_custom_data(custom: dict, namespace: str | None) -> dict:
+    """A bag's custom data as one vehicle's flight sees it: in a fleet's bag, the failure keys of vehicle
+    ``namespace`` (FAILURE_KEY + ':' + namespace) under the plain FAILURE_KEY and FAILURE_TIME_KEY."""
+    own = {key: custom[f'{key}:{namespace}'] for key in (FAILURE_KEY, FAILURE_TIME_KEY)
+           if namespace is not None and f'{key}:{namespace}' in custom}
+    return {**custom, **own}
+
+
 def flight_custom_data(params: VehicleParams, settle_time: float, **info) -> dict[str, str]:
     """Bag custom data of a flight: vehicle parameters (JSON), settle time [s] and labels (controller, ...)."""
     return {'vehicle': json.dumps(dataclasses.asdict(params)), 'settle_time_s': repr(float(settle_time)),
@@ -72,6 +85,7 @@ class FlightBag:
             name(CONTROL_DIAGNOSTICS)
         self._setpoints, self._path, self._tf = name(SETPOINTS), name(REFERENCE_PATH), name(TF)
         self._truth = name(GROUND_TRUTH)
+        self._failure_suffix = '' if shared_topics else f':{namespace}'    # a fleet's vehicle: keys of its own
         self._base_frame = base_frame(namespace)
         self._encode_clock = clock_encoder()
         self._encode_odometry = odometry_encoder(ODOM_FRAME, self._base_frame)
@@ -127,6 +141,12 @@ class FlightBag:
             write(self._reference, self._encode_pose(sec, nanosec, reference_position, reference_yaw), stamp)
         if self._diagnostics:
             write(self._diagnostics, self._encode_diagnostics(surfaces, equivalent, corrective, slopes), stamp)
+
+    def record_failure(self, reason: str, time_s: float) -> None:
+        """Note that the flight failed (``reason``, e.g. 'flipped over') at sim time ``time_s`` [s]: custom
+        data FAILURE_KEY and FAILURE_TIME_KEY, written when the bag closes, so its review says so."""
+        self.writer.custom_data.update({FAILURE_KEY + self._failure_suffix: str(reason),
+                                        FAILURE_TIME_KEY + self._failure_suffix: repr(float(time_s))})
 
     def close(self) -> None:
         self.writer.close()

@@ -160,7 +160,8 @@ class McapPrefix:
 
 
 def read_custom_data(bag: str | Path) -> dict[str, str]:
-    """The bag's custom data: ``metadata.yaml`` custom_data, else the MCAP ``custom_data`` metadata record."""
+    """The bag's custom data: ``metadata.yaml`` custom_data, else the last MCAP ``custom_data`` metadata
+    record (the one written when the bag was closed)."""
     bag = Path(bag)
     if bag.is_dir() and (bag / METADATA_FILE).is_file():
         custom = read_metadata(bag).get('custom_data')
@@ -170,7 +171,5 @@ def read_custom_data(bag: str | Path) -> dict[str, str]:
     if not is_finalized(path):
         return {}
     with path.open('rb') as stream:
-        for record in make_reader(stream).iter_metadata():
-            if record.name == CUSTOM_DATA_RECORD:
-                return dict(record.metadata)
-    return {}
+        records = [record for record in make_reader(stream).iter_metadata() if record.name == CUSTOM_DATA_RECORD]
+    return dict(records[-1].metadata) if records else {}

@@ -76,9 +76,13 @@ def write_bag_metadata(bag_dir: Path, information: dict) -> None:
 
 def finish_bag(file: McapFileWriter, bag_dir: Path | None, topics: Sequence[TopicEntry],
                channel_ids: Sequence[int], custom_data: Mapping[str, str]) -> dict:
-    """Finalize a bag: the open chunk, a ``rosbag2`` metadata record (as rosbag2 writes it), the MCAP
-    summary, then ``metadata.yaml`` in ``bag_dir`` (None: a lone MCAP file). Returns the bag information."""
+    """Finalize a bag: the open chunk, the final custom data record (what was added while recording,
+    e.g. a failure, is kept by a lone MCAP file too: the last such record wins), a ``rosbag2`` metadata
+    record (as rosbag2 writes it), the MCAP summary, then ``metadata.yaml`` in ``bag_dir`` (None: a
+    lone MCAP file). Returns the bag information."""
     file.write_open_chunk()
+    if custom_data:
+        file.add_metadata(CUSTOM_DATA_RECORD, dict(custom_data))
     information = bag_information(file, topics, channel_ids, custom_data)
     file.add_metadata('rosbag2', {'serialized_metadata': information_yaml(information), 'ROS_DISTRO': ROS_DISTRO})
     file.close()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -60,6 +61,21 @@ def review_bags(bags: Sequence[str | Path], out_dir: str | Path, *, namespace: s
     return review_flights(flights, out_dir, plots=plots)
 
 
+def with_failure(metrics: dict, flight: BagFlight) -> dict:
+    """``metrics`` with the flight's ``failure`` (why it ended early, None if it did not, as far as its bag
+    records) and ``failure_time_s`` [s, sim time], as ``summary.json`` has them."""
+    failure = flight.failure
+    return {**metrics, 'failure': None if failure is None else failure[0],
+            'failure_time_s': None if failure is None else failure[1]}
+
+
+def failure_note(label: str, metrics: dict) -> str:
+    """What the report says of a failed flight: why and when, and what its metrics cover."""
+    covered = ('NaN: it failed before the settling window ended' if math.isnan(metrics['rmse_position_m'])
+               else f'they cover the {metrics["duration_s"]:.3f} s it flew')
+    return f'{label} FAILED: {metrics["failure"]} at {metrics["failure_time_s"]:.3f} s; its metrics: {covered}'
+
+
 def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: bool = True) -> Review:
     """Metrics, plots and report of ``flights`` (several: compared) into ``out_dir``.
 
@@ -69,8 +85,9 @@ def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: 
     out_dir = Path(out_dir)
     for flight, label in zip(flights, _unique_labels(flights)):
         flight.label = label
-    metrics = [flight.metrics() for flight in flights]
+    metrics = [with_failure(flight.metrics(), flight) for flight in flights]
     notes = [f'{f.label}: {warning}' for f in flights for warning in f.warnings]
+    notes += [failure_note(f.label, m) for f, m in zip(flights, metrics) if m['failure'] is not None]
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / 'review.json').write_text(json.dumps(
         [{'label': f.label, 'bag': str(f.path), **m} for f, m in zip(flights, metrics)], indent=2) + '\n')

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from rosbags.highlevel import AnyReader, AnyReaderError
 
+from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, FAILURE_TIME_KEY, vehicle_custom_data
 from quad_msgs_bridge.bag.reader import BagReadError, check_bag_path, is_finalized, mcap_file, read_custom_data
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (ALL_TOPICS, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GROUND_TRUTH,
@@ -44,15 +45,22 @@ class BagFlight:
     settle_time: float            #: [s]
     custom_data: dict             #: the bag's custom data (controller, scenario, disturbances, ...)
     warnings: list = field(default_factory=list)
-    #: the flight failed and ended there (known for a flight just flown): if that was before two settled
-    #: steps its tracking figures are NaN, as in its summary, rather than a too-short flight refused
+    #: the flight failed and ended there (known for a flight just flown, and from a bag that records its
+    #: failure): if that was before two settled steps its tracking figures are NaN, as in its summary,
+    #: rather than a too-short flight refused
     ended_early: bool = False
+
+    @property
+    def failure(self) -> tuple[str, float] | None:
+        """(why, when [s, sim time]) the flight failed, from the bag's custom data; None if none is recorded."""
+        reason = self.custom_data.get(FAILURE_KEY)
+        return None if reason is None else (reason, float(self.custom_data.get(FAILURE_TIME_KEY, 'nan')))
 
     def metrics(self) -> dict:
         """The flight's metrics (:func:`~quad_msgs_bridge.review.metrics.flight_metrics`), as ``summary.json``."""
         return flight_metrics(self.record, self.settle_time, self.params.F_min, self.params.F_max,
                               fuzzy_term=has_fuzzy_term(self.custom_data.get('controller')),
-                              ended_early=self.ended_early)
+                              ended_early=self.ended_early, arm_length=self.params.d)
 
 
 def _stamp_ns(msg) -> int:
@@ -186,10 +194,12 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     params = _vehicle(custom, vehicle_file, warnings)
     if namespace is None:
         namespace = custom.get('namespace')
+    custom = vehicle_custom_data(custom, namespace)
     record = _flight_record(_read_topics(bag, namespace, params.d), warnings)
     if record is None:
         raise BagReadError(f'{bag}: no complete control step')
     if settle_time is None:
         recorded = custom.get('settle_time_s')
         settle_time = float(recorded) if recorded else default_settle_time(record.time[-1] - record.time[0])
-    return BagFlight(bag, custom.get('controller') or bag.name, record, params, float(settle_time), custom, warnings)
+    return BagFlight(bag, custom.get('controller') or bag.name, record, params, float(settle_time), custom, warnings,
+                     ended_early=FAILURE_KEY in custom)

@@ -81,6 +81,7 @@ def fuzzy_share(record: FlightRecord, window: float) -> dict[str, list[float]]:
     """
     edges = np.arange(record.time[0], record.time[-1] + window, window)
     index = np.searchsorted(record.time, edges)
+    index[-1] = len(record.time)          # the last window holds the last step, also one at its very edge
     shares = {}
     for k, name in enumerate(SUBSYSTEMS):
         corrective = np.abs(record.corrective[:, k])
@@ -88,6 +89,43 @@ def fuzzy_share(record: FlightRecord, window: float) -> dict[str, list[float]]:
         shares[name] = [float(corrective[a:b].sum() / total[a:b].sum()) if total[a:b].sum() > 0 else 0.0
                         for a, b in zip(index[:-1], index[1:]) if b > a]
     return shares
+
+
+def share_extremes(shares: list[float], window: float, settle_time: float, duration: float) -> dict | None:
+    """Where the fuzzy share of one subsystem (``shares``: one value per ``window`` [s], from the
+    flight's first step) went after settling, so that a share which falls and rises again is reported
+    with its rise, not only as first -> last.
+
+    Only windows that start at or after ``settle_time`` [s] count (none: None). Returns ``first`` (the
+    share of the flight's first window), ``min``, ``max`` and ``last`` (each ``{'value': share,
+    'from_s': start, 'to_s': end}`` [s from the first step; the last window ends at ``duration`` at
+    the latest]) and ``rise``: the largest increase from a window to a later one, ``{'from': window,
+    'to': window}`` (None if the share never rises after settling).
+    """
+    settled = [{'value': float(value), 'from_s': k * window, 'to_s': min((k + 1) * window, duration)}
+               for k, value in enumerate(shares) if k * window >= settle_time - 1e-9]
+    if not settled:
+        return None
+    rise, lowest = None, settled[0]
+    for entry in settled[1:]:
+        if rise is None or entry['value'] - lowest['value'] > rise['to']['value'] - rise['from']['value']:
+            if entry['value'] > lowest['value']:
+                rise = {'from': lowest, 'to': entry}
+        if entry['value'] < lowest['value']:
+            lowest = entry
+    return {'first': float(shares[0]), 'min': min(settled, key=lambda e: e['value']),
+            'max': max(settled, key=lambda e: e['value']), 'last': settled[-1], 'rise': rise}
+
+
+def chattering_force(chattering: dict):
+    """The force channel's chattering [N/s]: total variation of the thrust U1 per second."""
+    return chattering['U1']
+
+
+def chattering_moment(chattering: dict, arm_length: float):
+    """The moment channels' chattering [N m/s]: total variation per second of the roll torque d U2,
+    the pitch torque d U3 and the yaw torque U4 (eq. 2), summed; ``arm_length`` d [m]."""
+    return arm_length * (chattering['U2'] + chattering['U3']) + chattering['U4']
 
 
 @dataclass
@@ -198,7 +236,9 @@ def tracking_metrics(stats: TrackingStatistics) -> dict:
 
     * rmse_position_m, max_position_error_m: Euclidean position error [m], settled steps;
     * rmse_yaw_rad: wrapped yaw error [rad], settled steps;
-    * chattering: total variation of each of U1..U4 per second of settled flight [N/s; U4: N m/s];
+    * chattering: per channel, total variation of U1..U4 per second of settled flight, each in its own
+      unit: U1, U2, U3 [N/s], U4 [N m/s] (never add them up: see :func:`chattering_force` and
+      :func:`chattering_moment` for the force and moment figures);
     * saturation_fraction: share of settled control steps with any rotor at F_min or F_max
       (saturation_fraction_whole_flight: over every step).
     """
@@ -215,14 +255,17 @@ def tracking_metrics(stats: TrackingStatistics) -> dict:
 
 
 def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max: float,
-                   share_window: float = SHARE_WINDOW, fuzzy_term: bool = True, ended_early: bool = False) -> dict:
+                   share_window: float = SHARE_WINDOW, fuzzy_term: bool = True, ended_early: bool = False,
+                   arm_length: float | None = None) -> dict:
     """Tracking, chattering and saturation figures of a flight, after ``settle_time`` [s].
 
     The figures of :func:`tracking_metrics`, plus the flight's duration and step count, whether
-    every force and position is finite, and fuzzy_share (see :func:`fuzzy_share`, over the whole
-    flight; None without a fuzzy term: ``fuzzy_term`` false, see :func:`has_fuzzy_term`). A flight
-    that ``ended_early`` (failed) before two settled steps has NaN tracking figures; any other flight
-    that short is refused (ValueError).
+    every force and position is finite, chattering_force_n_per_s (:func:`chattering_force`) and
+    chattering_moment_nm_per_s (:func:`chattering_moment` with ``arm_length`` d [m]; None without
+    it), and fuzzy_share (see :func:`fuzzy_share`, over the whole flight; None without a fuzzy term:
+    ``fuzzy_term`` false, see :func:`has_fuzzy_term`) with fuzzy_share_settled (per subsystem, see
+    :func:`share_extremes`). A flight that ``ended_early`` (failed) before two settled steps has NaN
+    tracking figures; any other flight that short is refused (ValueError).
     """
     stats = record_statistics(record, settle_time, f_min, f_max)
     if stats.settled_steps < 2 and not ended_early:
@@ -234,17 +277,25 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
     if stats.settled_steps < 2:
         tracking = {key: ({k: math.nan for k in value} if isinstance(value, dict) else math.nan)
                     for key, value in tracking.items()}
+    chattering = {name: float(value) for name, value in tracking['chattering'].items()}
+    shares = fuzzy_share(record, share_window) if fuzzy_term else None
+    duration = float(record.time[-1] - record.time[0])
     return {
         'settle_time_s': float(settle_time),
-        'duration_s': float(record.time[-1] - record.time[0]),
+        'duration_s': duration,
         'control_steps': int(len(record.time)),
         'rmse_position_m': float(tracking['rmse_position_m']),
         'max_position_error_m': float(tracking['max_position_error_m']),
         'rmse_yaw_rad': float(tracking['rmse_yaw_rad']),
-        'chattering': {name: float(value) for name, value in tracking['chattering'].items()},
+        'chattering': chattering,
+        'chattering_force_n_per_s': float(chattering_force(chattering)),
+        'chattering_moment_nm_per_s': (None if arm_length is None
+                                       else float(chattering_moment(chattering, arm_length))),
         'saturation_fraction': float(tracking['saturation_fraction']),
         'saturation_fraction_whole_flight': float(tracking['saturation_fraction_whole_flight']),
         'all_finite': bool(np.isfinite(record.forces).all() and np.isfinite(record.position).all()),
         'fuzzy_share_window_s': float(share_window),
-        'fuzzy_share': fuzzy_share(record, share_window) if fuzzy_term else None,
+        'fuzzy_share': shares,
+        'fuzzy_share_settled': None if shares is None else
+        {name: share_extremes(values, share_window, settle_time, duration) for name, values in shares.items()},
     }

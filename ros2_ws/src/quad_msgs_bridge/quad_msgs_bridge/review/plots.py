@@ -7,7 +7,9 @@
   [mm, mrad] (Fig. 8);
 * ``controls.png``: U1..U4 and the rotor thrusts F1..F4 against time (Fig. 9);
 * ``controls_zoom.png``: U1..U4 over one second after settling, where chattering shows;
-* ``surfaces.png``: the sliding surfaces S of the six subsystems [m/s, rad/s];
+* ``surfaces.png``: the sliding surfaces S of the six subsystems [m/s, rad/s], over the whole flight
+  (left) and after settling on the scale of that window (right: the take-off spike of S, tens of
+  rad/s, would flatten them);
 * ``fuzzy_share.png``: the fuzzy share of each subsystem's control over time,
   :func:`quad_msgs_bridge.review.metrics.fuzzy_share` on 0.5 s windows and on the windows of the
   metrics (5 s); only flights whose controller has a fuzzy term (no figure if none has).
@@ -151,15 +153,43 @@ def plot_controls(plt, flights: Sequence[BagFlight], path: Path, span: tuple[flo
     return _save(fig, path)
 
 
+def settled_limits(values: Sequence[np.ndarray], margin: float = 0.05) -> tuple[float, float] | None:
+    """(low, high) that hold every finite value of ``values`` (arrays over the settled steps), widened by
+    ``margin`` of their range (a flat line: by 1e-9 or 1e-6 of its level); None if there is none."""
+    finite = np.concatenate([np.asarray(v, dtype=float).ravel() for v in values]) if values else np.empty(0)
+    finite = finite[np.isfinite(finite)]
+    if finite.size == 0:
+        return None
+    low, high = float(finite.min()), float(finite.max())
+    pad = margin * (high - low) if high > low else max(1e-9, 1e-6 * abs(high))
+    return low - pad, high + pad
+
+
 def plot_surfaces(plt, flights: Sequence[BagFlight], path: Path) -> Path:
-    fig, axes = plt.subplots(3, 2, figsize=(12, 8), sharex=True)
+    """Per subsystem (rows): S over the whole flight (left, the end of the settling window marked) and S
+    after settling with the y axis scaled to the settled values (right)."""
+    fig, axes = plt.subplots(len(SUBSYSTEM_NAMES), 2, figsize=(13, 13))
+    settled_from = flights[0].record.time[0] + flights[0].settle_time
     for k, name in enumerate(SUBSYSTEM_NAMES):
-        ax = axes[k // 2][k % 2]
+        whole_ax, settled_ax = axes[k]
+        settled_values = []
         for i, flight in enumerate(flights):
-            ax.plot(flight.record.time, flight.record.surfaces[:, k], linewidth=0.8, **_layer(i, flights))
-        ax.axhline(0.0, color='grey', linewidth=0.5)
-        ax.set_ylabel(f'S_{name} [{SURFACE_UNITS[name]}]')
-    axes[0][0].set_title('Sliding surfaces S = de/dt + lambda e')
+            r = flight.record
+            settled = r.time >= r.time[0] + flight.settle_time
+            whole_ax.plot(r.time, r.surfaces[:, k], linewidth=0.8, **_layer(i, flights))
+            settled_ax.plot(r.time[settled], r.surfaces[settled, k], linewidth=0.8, **_layer(i, flights))
+            settled_values.append(r.surfaces[settled, k])
+        limits = settled_limits(settled_values)
+        if limits is None:
+            settled_ax.text(0.5, 0.5, 'no settled step', transform=settled_ax.transAxes, ha='center', va='center')
+        else:
+            settled_ax.set_ylim(*limits)
+        whole_ax.axvline(settled_from, label='end of settling window', **_SETTLE_STYLE)
+        for ax in (whole_ax, settled_ax):
+            ax.axhline(0.0, color='grey', linewidth=0.5)
+            ax.set_ylabel(f'S_{name} [{SURFACE_UNITS[name]}]')
+    axes[0][0].set_title('Sliding surfaces S = de/dt + lambda e, whole flight')
+    axes[0][1].set_title(f'After settling ({flights[0].settle_time:g} s), scaled to that window')
     for ax in axes[-1]:
         ax.set_xlabel('t [s]')
     _legend(axes[0][0], flights)

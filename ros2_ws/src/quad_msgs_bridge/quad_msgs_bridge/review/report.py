@@ -1,8 +1,8 @@
 """The review's metrics table (text for the terminal) and one-page report (``report.md``, ``report.html``).
 
 One column per flight, so a comparison (e.g. NNIT2FSMC against sign SMC) reads across a row. The
-report also says what was flown (controller, scenario, disturbances: from the bag's custom data) and
-what each metric means.
+report also says what was flown (controller, scenario, disturbances, seeds: from the bag's custom
+data), whether and when the flight failed, and what each metric means.
 """
 from __future__ import annotations
 
@@ -17,29 +17,67 @@ NOT_RECORDED = 'not recorded'
 #: (custom data key, what it says) of the flight description
 FLIGHT_FACTS = (('controller', 'controller'), ('scenario', 'scenario'),
                 ('disturbances', 'disturbances (paper section IV)'), ('backend', 'backend'), ('seed', 'NN seed'))
+#: (custom data key, what it says) shown only when the bag has them (a campaign flight's replay)
+CAMPAIGN_FACTS = (('campaign_seed', 'campaign seed'), ('flight', 'campaign flight'))
 #: (metric, what it means), in the order of the table
 METRIC_MEANINGS = (
+    ('result', 'whether the flight flew its whole duration, or why and when it failed (ended early); the '
+               'metrics of a failed flight cover the time it flew, and are NaN if it failed before settling'),
     ('settle time', 'the first seconds of the flight (take-off and convergence), left out of every metric below '
                     'unless said otherwise'),
     ('position RMSE', 'root mean square of the distance between the vehicle and the reference position'),
     ('max position error', 'largest distance between the vehicle and the reference position; the run fails '
                            '(flight_ok false) when it exceeds --max-error'),
     ('yaw RMSE', 'root mean square of the yaw error, wrapped to [-pi, pi)'),
-    ('chattering U1..U4', 'total variation of each control signal per second: sum of |U(k+1) - U(k)| over the '
-                          'steps, divided by the time span; high values mean chattering (the paper\'s Fig. 9)'),
+    ('chattering', 'total variation of a control signal per second: sum of |U(k+1) - U(k)| over the steps, '
+                   'divided by the time span; high values mean chattering (the paper\'s Fig. 9). The force '
+                   'channel (thrust U1 [N/s]) and the moment channels (roll torque d U2, pitch torque d U3 and yaw '
+                   'torque U4, d the arm length, summed [N m/s]) are given apart, then each U1..U4 in its own unit'),
     ('rotor saturation', 'share of control steps with a rotor thrust at its limit F_min or F_max (and the same '
                          'over the whole flight, take-off included)'),
-    ('fuzzy share', 'per subsystem, mean |fuzzy term| / mean(|NN term| + |fuzzy term|) over the whole flight in '
-                    'windows (first and last window shown): it falls as the network learns the equivalent control; '
-                    'n/a for controllers without a fuzzy term (sliding mode baselines, PID)'),
+    ('fuzzy share', 'per subsystem, mean |fuzzy term| / mean(|NN term| + |fuzzy term|) in consecutive windows of '
+                    'the flight: the first window, then after settling the lowest and the highest window, the '
+                    'largest rise (from a window to a later, higher one) and the last window, each with its time '
+                    'span (every window: the table below); it falls as the network learns the equivalent control, '
+                    'and a rise after settling shows; n/a for controllers without a fuzzy term (sliding mode '
+                    'baselines, PID)'),
 )
 
 
+def describe_share(extremes: dict | None, shares: list[float]) -> str:
+    """'0.91; min 0.04 at 50-55 s, max 0.76 at 5-10 s, rises 0.05 (20-25 s) -> 0.67 (35-40 s), last 0.19 at
+    55-60 s': one subsystem's :func:`~quad_msgs_bridge.review.metrics.share_extremes` (times from the
+    flight's first step); for a flight too short for a window after settling, the first of its ``shares``."""
+    if extremes is None:
+        return f'{shares[0]:.2f}; no window starts after settling' if shares else '-'
+    def span(window: dict) -> str:
+        return f'{window["from_s"]:g}-{window["to_s"]:.4g} s'
+
+    def at(name: str) -> str:
+        return f'{name} {extremes[name]["value"]:.2f} at {span(extremes[name])}'
+    rise = extremes['rise']
+    shown_rise = rise is not None and round(rise['to']['value'], 2) > round(rise['from']['value'], 2)
+    rises = ('no rise' if not shown_rise else f'rises {rise["from"]["value"]:.2f} ({span(rise["from"])}) -> '
+             f'{rise["to"]["value"]:.2f} ({span(rise["to"])})')
+    return f'{extremes["first"]:.2f}; {at("min")}, {at("max")}, {rises}, {at("last")}'
+
+
 def _share(metrics: dict, axis: str) -> str:
-    shares = metrics['fuzzy_share']
-    if shares is None:
+    if metrics['fuzzy_share'] is None:
         return 'n/a'
-    return f'{shares[axis][0]:.2f} -> {shares[axis][-1]:.2f}' if shares[axis] else '-'
+    return describe_share(metrics['fuzzy_share_settled'][axis], metrics['fuzzy_share'][axis])
+
+
+def describe_result(metrics: dict) -> str:
+    """'flew its whole duration', or 'FAILED: flipped over at 1.472 s' (metrics with the flight's failure)."""
+    if metrics.get('failure') is None:
+        return 'flew its whole duration'
+    return f'FAILED: {metrics["failure"]} at {metrics["failure_time_s"]:.3f} s'
+
+
+def _moment(metrics: dict) -> str:
+    moment = metrics['chattering_moment_nm_per_s']
+    return 'n/a' if moment is None else f'{moment:.4g}'
 
 
 def metric_rows(metrics: Sequence[dict]) -> list[tuple[str, list[str]]]:
@@ -48,6 +86,7 @@ def metric_rows(metrics: Sequence[dict]) -> list[tuple[str, list[str]]]:
         return name, [value(m) for m in metrics]
 
     rows = [
+        row('result', describe_result),
         row('sim time [s]', lambda m: f'{m["duration_s"]:.2f}'),
         row('control steps', lambda m: f'{m["control_steps"]}'),
         row('settle time [s]', lambda m: f'{m["settle_time_s"]:.1f}'),
@@ -55,14 +94,31 @@ def metric_rows(metrics: Sequence[dict]) -> list[tuple[str, list[str]]]:
         row('max position error [cm]', lambda m: f'{m["max_position_error_m"] * 100:.3f}'),
         row('yaw RMSE [rad]', lambda m: f'{m["rmse_yaw_rad"]:.5f}'),
     ]
+    rows.append(row('chattering, force: U1 [N/s]', lambda m: f'{m["chattering_force_n_per_s"]:.4g}'))
+    rows.append(row('chattering, moments: d U2 + d U3 + U4 [N m/s]', _moment))
     for name, unit in zip(CONTROL_NAMES, CONTROL_UNITS):
-        rows.append(row(f'chattering {name} [{unit}/s]', lambda m, n=name: f'{m["chattering"][n]:.4g}'))
+        rows.append(row(f'  chattering {name} [{unit}/s]', lambda m, n=name: f'{m["chattering"][n]:.4g}'))
     rows.append(row('rotor saturation [% of steps]', lambda m: f'{m["saturation_fraction"] * 100:.2f}'))
     rows.append(row('  over the whole flight [%]', lambda m: f'{m["saturation_fraction_whole_flight"] * 100:.2f}'))
     window = metrics[0]['fuzzy_share_window_s']
     for axis in SUBSYSTEM_NAMES:
-        rows.append(row(f'fuzzy share {axis} (first -> last {window:g} s window)', lambda m, a=axis: _share(m, a)))
+        rows.append(row(f'fuzzy share {axis} ({window:g} s windows)', lambda m, a=axis: _share(m, a)))
     return rows
+
+
+def share_windows(flight_label: str, metrics: dict) -> tuple[list[str], list[list[str]]] | None:
+    """(header, rows) of one flight's fuzzy share in every window: one row per window [s], one column per
+    subsystem; None without a fuzzy term."""
+    shares, window = metrics['fuzzy_share'], metrics['fuzzy_share_window_s']
+    if shares is None:
+        return None
+    count = max(len(values) for values in shares.values())
+    header = [f'{flight_label}: window [s]', *SUBSYSTEM_NAMES]
+    rows = [[f'{k * window:g} - {min((k + 1) * window, metrics["duration_s"]):.4g}'
+             + (' (settling)' if k * window < metrics['settle_time_s'] - 1e-9 else '')]
+            + [f'{shares[axis][k]:.3f}' if k < len(shares[axis]) else '-' for axis in SUBSYSTEM_NAMES]
+            for k in range(count)]
+    return header, rows
 
 
 def text_table(labels: Sequence[str], metrics: Sequence[dict]) -> str:
@@ -75,9 +131,15 @@ def text_table(labels: Sequence[str], metrics: Sequence[dict]) -> str:
 
 
 def flight_facts(flight) -> list[tuple[str, str]]:
-    """(what, value) describing a reviewed flight (a :class:`~quad_msgs_bridge.review.flight_from_bag.BagFlight`)."""
+    """(what, value) describing a reviewed flight (a :class:`~quad_msgs_bridge.review.flight_from_bag.BagFlight`):
+    what was flown (the bag's custom data), whether and when it failed, and its bag."""
     custom = flight.custom_data
-    return [(name, str(custom.get(key) or NOT_RECORDED)) for key, name in FLIGHT_FACTS] + [('bag', str(flight.path))]
+    failure = flight.failure
+    return ([(name, str(custom.get(key) or NOT_RECORDED)) for key, name in FLIGHT_FACTS]
+            + [(name, str(custom[key])) for key, name in CAMPAIGN_FACTS if key in custom]
+            + [('result', 'no failure recorded' if failure is None
+                else f'FAILED: {failure[0]} at {failure[1]:.3f} s')]
+            + [('bag', str(flight.path))])
 
 
 def _relative(path: Path, start: Path) -> str:
@@ -94,6 +156,12 @@ def write_markdown(path: Path, flights: Sequence, metrics: Sequence[dict], plots
               '|---|' + '---:|' * len(labels)]
     lines += [f'| {name} | ' + ' | '.join(values) + ' |' for name, values in metric_rows(metrics)]
     lines += ['', '### What the metrics mean', ''] + [f'- **{name}**: {meaning}' for name, meaning in METRIC_MEANINGS]
+    tables = [table for flight, m in zip(flights, metrics) if (table := share_windows(flight.label, m))]
+    if tables:
+        lines += ['', '## Fuzzy share per window', '']
+        for header, rows in tables:
+            lines += ['| ' + ' | '.join(header) + ' |', '|---|' + '---:|' * (len(header) - 1)]
+            lines += ['| ' + ' | '.join(row) + ' |' for row in rows] + ['']
     if notes:
         lines += ['', '## Notes', ''] + [f'- {note}' for note in notes]
     if plots:
@@ -119,6 +187,13 @@ def write_html(path: Path, flights: Sequence, metrics: Sequence[dict], plots: Se
              f'</style></head><body><h1>Flight review</h1><ul>{described}</ul>',
              f'<h2>Metrics</h2><table><tr><th>metric</th>{head}</tr>{body}</table>',
              f'<h3>What the metrics mean</h3><ul>{meanings}</ul>']
+    tables = [table for flight, m in zip(flights, metrics) if (table := share_windows(flight.label, m))]
+    if tables:
+        parts.append('<h2>Fuzzy share per window</h2>')
+        for header, rows in tables:
+            parts.append('<table><tr>' + ''.join(f'<th>{esc(h)}</th>' for h in header) + '</tr>'
+                         + ''.join('<tr>' + ''.join(f'<td>{esc(c)}</td>' for c in row) + '</tr>' for row in rows)
+                         + '</table>')
     if notes:
         parts.append('<h2>Notes</h2><ul>' + ''.join(f'<li>{esc(n)}</li>' for n in notes) + '</ul>')
     if plots:
