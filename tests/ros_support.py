@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -19,6 +21,19 @@ except ImportError:
     HAVE_RCLPY = False
 
 requires_ros = pytest.mark.skipif(not HAVE_RCLPY, reason=SKIP_REASON)
+
+
+def importable(module: str) -> bool:
+    """Whether ``module`` imports here (the PyPI ROS 2 wheels lack tf2_msgs and tf2_ros, for example)."""
+    try:
+        __import__(module)
+    except ImportError:
+        return False
+    return True
+
+
+#: tf2_msgs is installed: the simulator broadcasts /tf (without it, it flies on without /tf)
+HAVE_TF2_MSGS = HAVE_RCLPY and importable('tf2_msgs.msg')
 
 # Our own DDS domain, so these tests neither see nor disturb other ROS 2 processes on the machine.
 os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
@@ -41,3 +56,17 @@ def spin_until(node, condition, timeout: float) -> bool:
         if condition():
             return True
     return False
+
+
+@contextmanager
+def cpu_hogs(count: int | None = None):
+    """A loaded machine while the block runs: ``count`` busy-loop processes (default one per CPU)."""
+    hogs = [subprocess.Popen([sys.executable, '-c', 'while True: pass'], stdin=subprocess.DEVNULL)
+            for _ in range(count or os.cpu_count() or 1)]
+    try:
+        yield hogs
+    finally:
+        for hog in hogs:
+            hog.kill()
+        for hog in hogs:
+            hog.wait()
