@@ -1,4 +1,7 @@
-"""Helpers of the ROS 2 integration tests: skip without rclpy, isolate the DDS domain, start nodes."""
+"""Helpers of the ROS 2 integration tests: skip without rclpy, isolate the DDS domain, start nodes.
+
+``python tests/ros_support.py`` prints which ROS 2 this interpreter sees (scripts/test.sh says so per run).
+"""
 from __future__ import annotations
 
 import os
@@ -35,15 +38,29 @@ def importable(module: str) -> bool:
 #: tf2_msgs is installed: the simulator broadcasts /tf (without it, it flies on without /tf)
 HAVE_TF2_MSGS = HAVE_RCLPY and importable('tf2_msgs.msg')
 
+#: the venv of the PyPI ROS 2 wheels that scripts/test.sh builds (ROS_WHEELS_VENV names another)
+ROS_WHEELS_VENV = Path(os.environ.get('ROS_WHEELS_VENV', ROOT / '.venv-ros-wheels'))
+
+
+def ros_wheels_python() -> list[str] | None:
+    """The command that runs the ROS 2 wheels venv's Python with any sourced ROS 2 taken out of its environment
+    (scripts/without_sourced_ros.sh), or None where that venv has not been built."""
+    python = ROS_WHEELS_VENV / 'bin' / 'python'
+    if not python.exists():
+        return None
+    return ['bash', str(ROOT / 'scripts' / 'without_sourced_ros.sh'), str(python)]
+
 # Our own DDS domain, so these tests neither see nor disturb other ROS 2 processes on the machine.
 os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
 
 
-def node_process(name: str, module: str, namespace: str, params: dict, quiet: bool = True):
-    """Start one node of this source tree in its own process."""
+def node_process(name: str, module: str, namespace: str, params: dict, quiet: bool = True,
+                 python: list[str] | None = None):
+    """Start one node of this source tree in its own process, run by ``python`` (a command; default this
+    interpreter)."""
     from flight_stack.processes import NodeProcess, source_tree_environment
     from flight_stack.ros_backend import _ros_args
-    return NodeProcess(name, [sys.executable, '-m', module] + _ros_args(namespace, params),
+    return NodeProcess(name, (python or [sys.executable]) + ['-m', module] + _ros_args(namespace, params),
                        source_tree_environment(), quiet=quiet)
 
 
@@ -70,3 +87,49 @@ def cpu_hogs(count: int | None = None):
             hog.kill()
         for hog in hogs:
             hog.wait()
+
+
+def rclpy_version() -> str:
+    """rclpy's version: from the PyPI wheel's metadata, else from the package.xml of the sourced ROS 2."""
+    from importlib import metadata
+    for distribution in ('ros-rclpy', 'rclpy'):
+        try:
+            return metadata.version(distribution)
+        except metadata.PackageNotFoundError:
+            pass
+    try:
+        import re
+        from ament_index_python.packages import get_package_share_directory
+        text = Path(get_package_share_directory('rclpy'), 'package.xml').read_text()
+        return re.search(r'<version>([^<]+)</version>', text).group(1)
+    except (ImportError, LookupError, OSError, AttributeError):
+        return 'unknown'
+
+
+WHEELS = 'wheels'
+
+
+def ros_distribution() -> str | None:
+    """Which ROS 2 this interpreter's rclpy belongs to: WHEELS where it is pip-installed in this venv (the PyPI
+    ROS 2 wheels), else the sourced distribution's name (ROS_DISTRO: 'jazzy'); None without rclpy or ROS_DISTRO."""
+    if not HAVE_RCLPY:
+        return None
+    import rclpy
+    if Path(rclpy.__file__).resolve().is_relative_to(Path(sys.prefix).resolve()):
+        return WHEELS
+    return os.environ.get('ROS_DISTRO')
+
+
+def describe_ros() -> str:
+    """One line: which ROS 2 the ROS tests of this interpreter run against (distro, rclpy version, RMW)."""
+    if not HAVE_RCLPY:
+        return 'ROS 2: none (rclpy cannot be imported: the ROS tests skip)'
+    from rclpy.utilities import get_rmw_implementation_identifier
+    origin = {WHEELS: 'the PyPI ROS 2 wheels', None: '(distro unknown: ROS_DISTRO unset)'}.get(
+        ros_distribution(), ros_distribution())
+    return (f'ROS 2: {origin}, rclpy {rclpy_version()}, RMW {get_rmw_implementation_identifier()}, '
+            f'tf2_msgs {"yes" if HAVE_TF2_MSGS else "no"}, Python {sys.version.split()[0]}')
+
+
+if __name__ == '__main__':
+    print(describe_ros())
