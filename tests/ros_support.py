@@ -14,8 +14,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-SKIP_REASON = ('rclpy cannot be imported: source /opt/ros/jazzy/setup.bash (ROS 2 Jazzy) to run the ROS 2 '
-               'integration tests')
+SKIP_REASON = ('rclpy cannot be imported here: the ROS 2 integration tests run in .venv-ros-wheels (bash '
+               'scripts/test.sh builds it) and with ROS 2 Jazzy sourced (source /opt/ros/jazzy/setup.bash)')
 
 try:
     import rclpy  # noqa: F401

@@ -1,8 +1,8 @@
 """Interoperability of the two ROS 2 this stack is tested on: nodes on the PyPI ROS 2 wheels (Kilted-series rclpy,
-Fast DDS 3) and nodes on a sourced ROS 2 Jazzy fly one lockstep flight together over DDS on localhost.
-
-Runs in a test run on ROS 2 Jazzy where the wheels venv (.venv-ros-wheels, built by scripts/test.sh) exists;
-skips, saying which is missing, elsewhere. What is known and verified about the pair: docs/ROS.md.
+Fast DDS 3) and nodes on a sourced ROS 2 Jazzy fly one lockstep flight together over DDS on localhost (in a run on
+Jazzy where the wheels venv, .venv-ros-wheels built by scripts/test.sh, exists; it skips, saying which is missing,
+elsewhere), and the contract types of both announce the same type hashes (wherever the wheels venv exists).
+What is known and verified about the pair: docs/ROS.md.
 """
 from __future__ import annotations
 
@@ -14,13 +14,10 @@ from ros_support import (HAVE_RCLPY, ROS_WHEELS_VENV, describe_ros, node_process
 
 WHEELS_PYTHON = ros_wheels_python()
 
-pytestmark = [
-    requires_ros, pytest.mark.ros,
-    pytest.mark.skipif(HAVE_RCLPY and ros_distribution() != 'jazzy',
-                       reason=f'needs ROS 2 Jazzy sourced for this run (it has {describe_ros()})'),
-    pytest.mark.skipif(WHEELS_PYTHON is None,
-                       reason=f'needs the ROS 2 wheels venv {ROS_WHEELS_VENV} (bash scripts/test.sh builds it)'),
-]
+NEEDS_THE_WHEELS = pytest.mark.skipif(
+    WHEELS_PYTHON is None, reason=f'needs the ROS 2 wheels venv {ROS_WHEELS_VENV} (bash scripts/test.sh builds it)')
+NEEDS_JAZZY = pytest.mark.skipif(HAVE_RCLPY and ros_distribution() != 'jazzy',
+                                 reason=f'needs ROS 2 Jazzy sourced for this run (it has {describe_ros()})')
 
 if HAVE_RCLPY:
     import rclpy
@@ -28,7 +25,7 @@ if HAVE_RCLPY:
     from quad_msgs_bridge.ros_helpers import qos_profile
 
 from flight_stack.processes import stop_all
-from quad_msgs_bridge.contract import CLOCK, CONTROL_WRENCH, ODOM, resolve
+from quad_msgs_bridge.contract import ALL_TOPICS, CLOCK, CONTROL_WRENCH, ODOM, resolve
 from quad_msgs_bridge.conversions import rclpy_kit
 from quad_msgs_bridge.fast_cdr import decode_odometry
 
@@ -97,8 +94,32 @@ def fly(node, namespace: str, on_wheels: set[str]) -> dict:
     return received
 
 
+@NEEDS_THE_WHEELS
+def test_the_wheels_contract_types_have_the_jazzy_type_hashes():
+    """Every contract type the wheels carry has the RIHS01 hash of ROS 2 Jazzy's (the rosbags Jazzy typestore's,
+    which equal the Jazzy interface packages': tests/test_bag_writer.py): a Jazzy and a wheels endpoint announce
+    the same type. Read from the wheels' interface descriptions, no ROS needed."""
+    import json
+    from quad_msgs_bridge.bag.writer import jazzy_typestore
+    typestore = jazzy_typestore()
+    compared = []
+    for type_name in sorted({topic.type for topic in ALL_TOPICS}):
+        package, _, name = type_name.split('/')
+        description = ROS_WHEELS_VENV / 'share' / package / 'msg' / f'{name}.json'
+        if not description.exists():     # tf2_msgs: not in the wheels
+            continue
+        hashes = {entry['type_name']: entry['hash_string'] for entry in json.loads(description.read_text())['type_hashes']}
+        assert hashes[type_name] == typestore.hash_rihs01(type_name), type_name
+        compared.append(type_name)
+    assert len(compared) >= 7 and 'nav_msgs/msg/Odometry' in compared and 'rosgraph_msgs/msg/Clock' in compared
+
+
 @pytest.mark.parametrize('on_wheels', [{'sim', 'trajectory'}, {'controller'}],
                          ids=['sim and trajectory on the wheels', 'controller on the wheels'])
+@pytest.mark.ros
+@requires_ros
+@NEEDS_JAZZY
+@NEEDS_THE_WHEELS
 def test_nodes_on_the_ros2_wheels_and_on_jazzy_fly_the_flight_that_jazzy_flies_alone(ros_node, on_wheels):
     """Across the two, every contract topic of a flight crosses from one ROS 2 to the other in one of the two
     cases (odom, /clock, rotor_forces, setpoints, reference_path, control/*): the lockstep flight completes every
