@@ -11,8 +11,8 @@ cd "$(dirname "$0")/.."
 bash scripts/setup_venv.sh .venv requirements-test.txt
 bash scripts/setup_venv.sh .venv-numpy126 requirements-test.txt
 .venv-numpy126/bin/python -m pip install --quiet --disable-pip-version-check numpy==1.26.4
-wheels=${SKIP_ROS_WHEELS:-0}
-if [ "$wheels" != 1 ]; then
+skip_wheels=${SKIP_ROS_WHEELS:-0}
+if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels: installing the pinned PyPI ROS 2 wheels (requirements-ros-wheels.txt)"
   bash scripts/without_sourced_ros.sh bash scripts/setup_venv.sh .venv-ros-wheels requirements-ros-wheels.txt --isolated
 fi
@@ -32,7 +32,7 @@ for venv in .venv .venv-numpy126; do
   echo "== $venv: numpy $("$venv/bin/python" -c 'import numpy; print(numpy.__version__)'); $("$venv/bin/python" tests/ros_support.py)"
   run_pytest "$venv/bin/python" -m pytest "$@"
 done
-if [ "$wheels" != 1 ]; then
+if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels, ROS tests only (-m ros): $(bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python tests/ros_support.py)"
   run_pytest bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python -m pytest "$@" -m ros
 fi
