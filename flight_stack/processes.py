@@ -24,7 +24,7 @@ def node_command(package: str, executable: str, module: str) -> list[str]:
         from ament_index_python.packages import PackageNotFoundError, get_package_prefix
         try:
             installed = Path(get_package_prefix(package)) / 'lib' / package / executable
-        except PackageNotFoundError:
+        except (PackageNotFoundError, OSError):   # OSError: no AMENT_PREFIX_PATH (as with the PyPI ROS 2 wheels)
             installed = None
     except ImportError:
         installed = None

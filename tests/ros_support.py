@@ -1,16 +1,21 @@
-"""Helpers of the ROS 2 integration tests: skip without rclpy, isolate the DDS domain, start nodes."""
+"""Helpers of the ROS 2 integration tests: skip without rclpy, isolate the DDS domain, start nodes.
+
+``python tests/ros_support.py`` prints which ROS 2 this interpreter sees (scripts/test.sh says so per run).
+"""
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
-SKIP_REASON = ('rclpy cannot be imported: source /opt/ros/jazzy/setup.bash (ROS 2 Jazzy) to run the ROS 2 '
-               'integration tests')
+SKIP_REASON = ('rclpy cannot be imported here: the ROS 2 integration tests run in .venv-ros-wheels (bash '
+               'scripts/test.sh builds it) and with ROS 2 Jazzy sourced (source /opt/ros/jazzy/setup.bash)')
 
 try:
     import rclpy  # noqa: F401
@@ -20,15 +25,42 @@ except ImportError:
 
 requires_ros = pytest.mark.skipif(not HAVE_RCLPY, reason=SKIP_REASON)
 
+
+def importable(module: str) -> bool:
+    """Whether ``module`` imports here (the PyPI ROS 2 wheels lack tf2_msgs and tf2_ros, for example)."""
+    try:
+        __import__(module)
+    except ImportError:
+        return False
+    return True
+
+
+#: tf2_msgs is installed: the simulator broadcasts /tf (without it, it flies on without /tf)
+HAVE_TF2_MSGS = HAVE_RCLPY and importable('tf2_msgs.msg')
+
+#: the venv of the PyPI ROS 2 wheels that scripts/test.sh builds (ROS_WHEELS_VENV names another)
+ROS_WHEELS_VENV = Path(os.environ.get('ROS_WHEELS_VENV', ROOT / '.venv-ros-wheels'))
+
+
+def ros_wheels_python() -> list[str] | None:
+    """The command that runs the ROS 2 wheels venv's Python with any sourced ROS 2 taken out of its environment
+    (scripts/without_sourced_ros.sh), or None where that venv has not been built."""
+    python = ROS_WHEELS_VENV / 'bin' / 'python'
+    if not python.exists():
+        return None
+    return ['bash', str(ROOT / 'scripts' / 'without_sourced_ros.sh'), str(python)]
+
 # Our own DDS domain, so these tests neither see nor disturb other ROS 2 processes on the machine.
 os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
 
 
-def node_process(name: str, module: str, namespace: str, params: dict, quiet: bool = True):
-    """Start one node of this source tree in its own process."""
+def node_process(name: str, module: str, namespace: str, params: dict, quiet: bool = True,
+                 python: list[str] | None = None):
+    """Start one node of this source tree in its own process, run by ``python`` (a command; default this
+    interpreter)."""
     from flight_stack.processes import NodeProcess, source_tree_environment
     from flight_stack.ros_backend import _ros_args
-    return NodeProcess(name, [sys.executable, '-m', module] + _ros_args(namespace, params),
+    return NodeProcess(name, (python or [sys.executable]) + ['-m', module] + _ros_args(namespace, params),
                        source_tree_environment(), quiet=quiet)
 
 
@@ -41,3 +73,63 @@ def spin_until(node, condition, timeout: float) -> bool:
         if condition():
             return True
     return False
+
+
+@contextmanager
+def cpu_hogs(count: int | None = None):
+    """A loaded machine while the block runs: ``count`` busy-loop processes (default one per CPU)."""
+    hogs = [subprocess.Popen([sys.executable, '-c', 'while True: pass'], stdin=subprocess.DEVNULL)
+            for _ in range(count or os.cpu_count() or 1)]
+    try:
+        yield hogs
+    finally:
+        for hog in hogs:
+            hog.kill()
+        for hog in hogs:
+            hog.wait()
+
+
+def rclpy_version() -> str:
+    """rclpy's version: from the PyPI wheel's metadata, else from the package.xml of the sourced ROS 2."""
+    from importlib import metadata
+    for distribution in ('ros-rclpy', 'rclpy'):
+        try:
+            return metadata.version(distribution)
+        except metadata.PackageNotFoundError:
+            pass
+    try:
+        import re
+        from ament_index_python.packages import get_package_share_directory
+        text = Path(get_package_share_directory('rclpy'), 'package.xml').read_text()
+        return re.search(r'<version>([^<]+)</version>', text).group(1)
+    except (ImportError, LookupError, OSError, AttributeError):
+        return 'unknown'
+
+
+WHEELS = 'wheels'
+
+
+def ros_distribution() -> str | None:
+    """Which ROS 2 this interpreter's rclpy belongs to: WHEELS where it is pip-installed in this venv (the PyPI
+    ROS 2 wheels), else the sourced distribution's name (ROS_DISTRO: 'jazzy'); None without rclpy or ROS_DISTRO."""
+    if not HAVE_RCLPY:
+        return None
+    import rclpy
+    if Path(rclpy.__file__).resolve().is_relative_to(Path(sys.prefix).resolve()):
+        return WHEELS
+    return os.environ.get('ROS_DISTRO')
+
+
+def describe_ros() -> str:
+    """One line: which ROS 2 the ROS tests of this interpreter run against (distro, rclpy version, RMW)."""
+    if not HAVE_RCLPY:
+        return 'ROS 2: none (rclpy cannot be imported: the ROS tests skip)'
+    from rclpy.utilities import get_rmw_implementation_identifier
+    origin = {WHEELS: 'the PyPI ROS 2 wheels', None: '(distro unknown: ROS_DISTRO unset)'}.get(
+        ros_distribution(), ros_distribution())
+    return (f'ROS 2: {origin}, rclpy {rclpy_version()}, RMW {get_rmw_implementation_identifier()}, '
+            f'tf2_msgs {"yes" if HAVE_TF2_MSGS else "no"}, Python {sys.version.split()[0]}')
+
+
+if __name__ == '__main__':
+    print(describe_ros())

@@ -9,6 +9,7 @@ either kind, and raise ValueError on a malformed or non-finite message.
 from __future__ import annotations
 
 import array
+import importlib
 import math
 from typing import Callable, Sequence
 
@@ -50,10 +51,28 @@ def rosbags_kit() -> MessageKit:
     return MessageKit(lambda name: typestore.types[name], lambda values: np.asarray(values, dtype=np.float64))
 
 
+def generated_message_class(type_name: str) -> type:
+    """The rosidl-generated Python class of a ROS 2 type name: 'nav_msgs/msg/Odometry' -> ``nav_msgs.msg.Odometry``.
+
+    What ``rosidl_runtime_py.utilities.get_message`` does, without needing that package (the PyPI ROS 2
+    wheels lack it). ValueError for a name not of the form 'package/msg/Type'; ImportError (ModuleNotFoundError
+    for a missing package) where the type is not installed.
+    """
+    parts = type_name.split('/') if isinstance(type_name, str) else []
+    if len(parts) != 3 or parts[1] != 'msg' or not all(part.isidentifier() for part in parts):
+        raise ValueError(f'type_name: {type_name!r} is not a message type name of the form package/msg/Type')
+    package, interface, name = parts
+    module = importlib.import_module(f'{package}.{interface}')
+    try:
+        return getattr(module, name)
+    except AttributeError:
+        raise ImportError(f'{package}.{interface} has no message {name}: {type_name} is not installed',
+                          name=f'{package}.{interface}') from None
+
+
 def rclpy_kit() -> MessageKit:
-    """rclpy's generated message classes (needs a sourced ROS 2)."""
-    from rosidl_runtime_py.utilities import get_message
-    return MessageKit(get_message, lambda values: array.array('d', values))
+    """rclpy's generated message classes (needs a sourced ROS 2 or the ROS 2 wheels)."""
+    return MessageKit(generated_message_class, lambda values: array.array('d', values))
 
 
 def _finite(values: Sequence[float], what: str) -> None:

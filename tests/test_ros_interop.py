@@ -1,0 +1,142 @@
+"""Interoperability of the two ROS 2 this stack is tested on: nodes on the PyPI ROS 2 wheels (Kilted-series rclpy,
+Fast DDS 3) and nodes on a sourced ROS 2 Jazzy fly one lockstep flight together over DDS on localhost (in a run on
+Jazzy where the wheels venv, .venv-ros-wheels built by scripts/test.sh, exists; it skips, saying which is missing,
+elsewhere), and the contract types of both announce the same type hashes (wherever the wheels venv exists).
+What is known and verified about the pair: docs/ROS.md.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ros_support import (HAVE_RCLPY, ROS_WHEELS_VENV, describe_ros, node_process, requires_ros, ros_distribution,
+                         ros_wheels_python, spin_until)
+
+WHEELS_PYTHON = ros_wheels_python()
+
+NEEDS_THE_WHEELS = pytest.mark.skipif(
+    WHEELS_PYTHON is None, reason=f'needs the ROS 2 wheels venv {ROS_WHEELS_VENV} (bash scripts/test.sh builds it)')
+NEEDS_JAZZY = pytest.mark.skipif(HAVE_RCLPY and ros_distribution() != 'jazzy',
+                                 reason=f'needs ROS 2 Jazzy sourced for this run (it has {describe_ros()})')
+
+if HAVE_RCLPY:
+    import rclpy
+
+    from quad_msgs_bridge.ros_helpers import qos_profile
+
+from flight_stack.processes import stop_all
+from quad_msgs_bridge.contract import ALL_TOPICS, CLOCK, CONTROL_WRENCH, ODOM, resolve
+from quad_msgs_bridge.conversions import rclpy_kit
+from quad_msgs_bridge.fast_cdr import decode_odometry
+
+DURATION = 2.0   #: [s, sim] of each flight
+STEPS = 2000     #: odometry steps of a flight at the default 1 kHz
+
+
+#: Fast DDS 2 (Jazzy: 2.14) and Fast DDS 3 (the wheels: 3.2) do not share shared-memory segments (their names
+#: changed in 3.0), so same-host traffic between them goes over UDP: every process of these tests uses UDPv4 only
+UDP_ONLY = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4'}
+
+
+@pytest.fixture
+def ros_node(monkeypatch):
+    for name, value in UDP_ONLY.items():    # before rclpy.init: this node's participant, and every node started
+        monkeypatch.setenv(name, value)
+    rclpy.init()
+    node = rclpy.create_node('interop_test')
+    yield node
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+def fly(node, namespace: str, on_wheels: set[str]) -> dict:
+    """A lockstep hover flight of the three nodes in ``namespace``, those named in ``on_wheels`` ('sim',
+    'trajectory', 'controller') on the ROS 2 wheels, the others on this run's ROS 2; what this node (on this
+    run's ROS 2) received: {'odom': [(stamp [s], position [m, world ENU])], 'wrench': count, 'clock': count}."""
+    kit = rclpy_kit()
+    received = {'odom': [], 'wrench': 0, 'clock': 0}
+
+    def count(key):
+        return lambda _: received.__setitem__(key, received[key] + 1)
+
+    def odometry(data: bytes):
+        sample = decode_odometry(data)
+        received['odom'].append((sample.stamp, sample.position))
+
+    subscriptions = [
+        node.create_subscription(kit[ODOM.type], resolve(ODOM, namespace), odometry, qos_profile(ODOM.qos), raw=True),
+        node.create_subscription(kit[CONTROL_WRENCH.type], resolve(CONTROL_WRENCH, namespace), count('wrench'),
+                                 qos_profile(CONTROL_WRENCH.qos), raw=True),
+        node.create_subscription(kit[CLOCK.type], CLOCK.name, count('clock'), qos_profile(CLOCK.qos), raw=True)]
+    start = [0.0, 0.0, 0.5] + [0.0] * 9          # at rest 0.5 m below the hover point: a flight, not a rest
+
+    def python(name):
+        return WHEELS_PYTHON if name in on_wheels else None
+
+    processes = [
+        node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
+                     {'scenario': 'hover', 'start_time': 0.0}, python=python('trajectory')),
+        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {},
+                     python=python('controller')),
+        # it waits for the controller's and this node's odom subscriptions; it stops stepping at DURATION
+        node_process('sim', 'quad_sim.sim_node', namespace,
+                     {'duration': DURATION, 'initial_state': start, 'wait_for_subscribers': 2},
+                     python=python('sim'))]
+    try:   # take what arrives while the flight runs (the histories hold less than a flight); the simulator stays
+        # up after the last step, so that nothing it sent is lost with its publishers
+        spin_until(node, lambda: (received['odom'] and received['odom'][-1][0] >= DURATION - 0.0015
+                                  and received['wrench'] >= STEPS and received['clock'] >= STEPS), timeout=120.0)
+    finally:
+        codes = stop_all(processes)
+        for subscription in subscriptions:
+            node.destroy_subscription(subscription)
+    assert all(code == 0 for code in codes.values()), (codes, [p.lines for p in processes])
+    return received
+
+
+@NEEDS_THE_WHEELS
+def test_the_wheels_contract_types_have_the_jazzy_type_hashes():
+    """Every contract type the wheels carry has the RIHS01 hash of ROS 2 Jazzy's (the rosbags Jazzy typestore's,
+    which equal the Jazzy interface packages': tests/test_bag_writer.py): a Jazzy and a wheels endpoint announce
+    the same type. Read from the wheels' interface descriptions, no ROS needed."""
+    import json
+    from quad_msgs_bridge.bag.writer import jazzy_typestore
+    typestore = jazzy_typestore()
+    compared = []
+    for type_name in sorted({topic.type for topic in ALL_TOPICS}):
+        package, _, name = type_name.split('/')
+        description = ROS_WHEELS_VENV / 'share' / package / 'msg' / f'{name}.json'
+        if not description.exists():     # tf2_msgs: not in the wheels
+            continue
+        hashes = {entry['type_name']: entry['hash_string'] for entry in json.loads(description.read_text())['type_hashes']}
+        assert hashes[type_name] == typestore.hash_rihs01(type_name), type_name
+        compared.append(type_name)
+    assert len(compared) >= 7 and 'nav_msgs/msg/Odometry' in compared and 'rosgraph_msgs/msg/Clock' in compared
+
+
+@pytest.mark.parametrize('on_wheels', [{'sim', 'trajectory'}, {'controller'}],
+                         ids=['sim and trajectory on the wheels', 'controller on the wheels'])
+@pytest.mark.ros
+@requires_ros
+@NEEDS_JAZZY
+@NEEDS_THE_WHEELS
+def test_nodes_on_the_ros2_wheels_and_on_jazzy_fly_the_flight_that_jazzy_flies_alone(ros_node, on_wheels):
+    """Across the two, every contract topic of a flight crosses from one ROS 2 to the other in one of the two
+    cases (odom, /clock, rotor_forces, setpoints, reference_path, control/*): the lockstep flight completes every
+    step, and it is the flight the same nodes fly on Jazzy alone."""
+    alone = fly(ros_node, 'interop_alone', set())
+    across = fly(ros_node, 'interop_across', on_wheels)
+    positions = {}
+    for name, flight in (('alone', alone), ('across', across)):
+        stamps = [round(stamp * 1e9) for stamp, _ in flight['odom']]     # [ns, sim]
+        # every step, in order, each one answered; a step may come twice (the simulator publishes a pending
+        # odometry again when its answer is late: input_timeout), then with the same pose
+        assert sorted(set(stamps)) == stamps[:1] + [b for a, b in zip(stamps, stamps[1:]) if b != a]
+        assert sorted(set(stamps)) == [k * 1_000_000 for k in range(STEPS)], name
+        by_stamp = {}
+        for stamp, (_, position) in zip(stamps, flight['odom']):
+            assert by_stamp.setdefault(stamp, position) == position, name
+        positions[name] = np.array([by_stamp[stamp] for stamp in sorted(by_stamp)])
+        assert flight['wrench'] >= STEPS and flight['clock'] >= STEPS, name
+    assert positions['alone'][-1][2] > 0.6          # it climbed toward the hover point
+    assert np.abs(positions['across'] - positions['alone']).max() <= 1e-9
