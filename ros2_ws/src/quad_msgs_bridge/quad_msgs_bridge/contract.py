@@ -62,7 +62,7 @@ CONTROL_DIAGNOSTICS = TopicSpec('control/diagnostics', 'std_msgs/msg/Float64Mult
                                 'controller -> tools: S, NN and fuzzy terms per subsystem')
 GROUND_TRUTH = TopicSpec('ground_truth/odom', 'nav_msgs/msg/Odometry', LOCKSTEP,
                          'simulator -> tools: the true state, recorded when odom carries sensor noise')
-CLOCK = TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', QosSpec('reliable', 'volatile', 10), 'quad_sim -> all')
+CLOCK = TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', LOCKSTEP, 'quad_sim -> all')
 TF = TopicSpec('/tf', 'tf2_msgs/msg/TFMessage', TF_QOS,
                'quad_sim -> tools: odom -> <namespace>/base_link of every vehicle, per odometry step')
 

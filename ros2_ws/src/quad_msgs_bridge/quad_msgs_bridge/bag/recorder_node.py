@@ -1,22 +1,37 @@
-"""record node: writes what goes over the contract topics into a rosbag2 MCAP bag.
+"""record node: writes what goes over the contract topics into a rosbag2 MCAP bag, at little cost to the flight.
 
-Messages are recorded as the serialized CDR bytes that arrived, with two times: the log time is
-the sim time of the latest ``/clock`` the recorder had taken when it took the message (0 before the
-first one, as a ROS clock under ``use_sim_time`` reads; wall time if ``/clock`` is not recorded;
-it takes what waits in rounds, ``/clock`` first, so log times never decrease), the publish time is
-the wall time the publisher sent it (DDS source timestamp), so a bag shows both the flight in sim
-time and the real message latencies.
+Every subscription is raw: the recorder gets the serialized CDR bytes that the publisher sent and
+writes them into the MCAP file as they are, never decoding or re-encoding a message. It does not
+wake per message either: every ``ROUND_PERIOD`` it takes what waits in every subscription's history
+(``RECORD_DEPTH`` deep, reliable) and writes it in one go; the MCAP chunks are compressed and
+written by the file's background thread. A lockstep flight never waits for the recorder (the
+simulator waits for the controllers only), so the recorder's whole cost to the flight is the CPU it
+takes from the simulator and the controllers, and the DDS delivery of one more reader.
+
+Each message has two times. The publish time is the wall time the publisher sent it (DDS source
+timestamp). The log time is the sim time of the latest ``/clock`` published before it: the
+messages taken in a round are merged in the order of their source timestamps (each topic keeps its
+own order), so a control step's messages are logged at its step's sim time, as a node under
+``use_sim_time`` would read its clock when publishing them (0 before the first ``/clock``; wall
+time if ``/clock`` is not recorded). Log times never decrease.
+
+Nothing is lost unnoticed: each publisher numbers its messages (DDS publication sequence number),
+and a gap in what the recorder took is counted, reported at the end, stored in the bag metadata
+(``custom_data.lost_messages``) and makes the recorder exit 1.
 
 One recorder records a fleet: the contract topics of every vehicle of ``vehicles`` (namespaces
 relative to the node's, by default its own), ``/clock`` and ``/tf`` once. Per-step topics published
 by the controllers must be discovered before ``odom`` is subscribed: a lockstep simulator that waits
 for the recorder's ``odom`` subscriptions then starts only when nothing of the flight can be missed.
-SIGINT/SIGTERM stop it cleanly: everything already received is drained and the bag is finalized.
+SIGINT/SIGTERM stop it cleanly: everything still arriving is taken and the bag is finalized. A
+killed recorder leaves a bag readable up to its last complete chunk (``recover`` finalizes it).
 """
 from __future__ import annotations
 
+import heapq
 import sys
 import time
+from operator import itemgetter
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -29,11 +44,22 @@ from quad_msgs_bridge.contract import (CLOCK, ODOM, RECORDED_TOPICS, SIMULATOR_T
 from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
 from quad_msgs_bridge.bag.flight_bag import flight_custom_data
 from quad_msgs_bridge.ros_helpers import declare, init_ros, qos_profile
+from quad_msgs_bridge.runtime import freeze_long_lived_objects
 from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
-RECORD_DEPTH = 10000   #: reader history: the recorder never drops a message it was sent
-BATCH_PERIOD = 0.002   #: [s, wall] the recorder wakes at most this often and takes everything waiting
+RECORD_DEPTH = 10000     #: reader history per topic: rounds ROUND_PERIOD apart never let it overflow
+ROUND_PERIOD = 0.005     #: [s, wall] the recorder takes what waits this often
+SPIN_PERIOD = 0.05       #: [s, wall] timers, services and discovery are served this often
+QUIET_TIME = 0.3         #: [s, wall] after SIGINT/SIGTERM, stop once nothing has arrived for this long
+
+_source_time = itemgetter(0)
+
+
+def _clock_ns(cdr: bytes) -> int:
+    """Sim time [ns] of a rosgraph_msgs/Clock in CDR: 4-byte encapsulation header, int32 sec, uint32 nanosec."""
+    return int.from_bytes(cdr[4:8], 'little', signed=True) * NANOSECONDS_PER_SECOND + \
+        int.from_bytes(cdr[8:12], 'little')
 
 
 class RecorderNode(Node):
@@ -41,7 +67,6 @@ class RecorderNode(Node):
         super().__init__('recorder')
         bag = declare(self, 'bag', '', 'bag directory to create (required)')
         topic_names = declare(self, 'topics', [t.name for t in RECORDED_TOPICS], 'contract topics to record')
-        queue_size = declare(self, 'queue_size', 100000, 'messages buffered for the writer thread', (1, 10 ** 7))
         overwrite = declare(self, 'overwrite', False, 'replace an existing bag at the same path')
         labels = {key: declare(self, key, '', f'{key} stored in the bag metadata')
                   for key in ('controller', 'scenario', 'disturbances')}
@@ -63,12 +88,13 @@ class RecorderNode(Node):
             {'vehicles': ','.join(self.namespaces)}
         custom = flight_custom_data(params, settle_time, backend='ros', seed=seed, **vehicles,
                                     **{k: v for k, v in labels.items() if v})
-        self.writer = BagWriter(bag, self.topics, self.namespaces, custom_data=custom, overwrite=overwrite,
-                                queue_size=queue_size)
+        self.writer = BagWriter(bag, self.topics, self.namespaces, custom_data=custom, overwrite=overwrite)
         self.kit = kit
         self.clock_ns: int | None = 0 if CLOCK in self.topics else None    #: sim time of the latest /clock [ns]
         self.received = 0
-        self.recorded: list = []
+        self.lost = 0                                 #: messages missing between publication sequence numbers
+        self._sequences: dict[tuple, int] = {}        #: (topic, publisher gid) -> last publication sequence number
+        self._recorded: list[tuple] = []              #: (name, is_clock, subscription handle, type, delivered)
         for name, topic in resolve_all(self.topics, self.namespaces):
             if topic is not ODOM:
                 self.subscribe(name, topic)
@@ -85,40 +111,45 @@ class RecorderNode(Node):
         return True
 
     def subscribe(self, name: str, topic: TopicSpec) -> None:
-        """Record ``topic`` under its absolute ``name``."""
+        """Record ``topic`` under its absolute ``name``: a raw subscription that the rounds take from."""
         qos = qos_profile(topic.qos)
         profile = QoSProfile(history=qos.history, depth=max(qos.depth, RECORD_DEPTH),
                              reliability=qos.reliability, durability=qos.durability)
-        is_clock = topic is CLOCK
+        delivered: list = []   # what the executor hands over between rounds (when it spins for timers)
+        subscription = self.create_subscription(self.kit[topic.type], name,
+                                                lambda data, info: delivered.append((data, info)), profile, raw=True)
+        self._recorded.append((name, topic is CLOCK, subscription.handle, subscription.msg_type, delivered))
 
-        def record(data: bytes, info) -> None:
-            now = time.time_ns()
-            if is_clock:   # CDR: 4-byte encapsulation header, then int32 sec, uint32 nanosec
-                sec = int.from_bytes(data[4:8], 'little', signed=True)
-                self.clock_ns = sec * NANOSECONDS_PER_SECOND + int.from_bytes(data[8:12], 'little')
-            log_time = self.clock_ns if self.clock_ns is not None else now
-            self.writer.write_serialized(name, data, log_time, info.get('source_timestamp', now) or now)
-            self.received += 1
-
-        def on_message(data: bytes, info) -> None:
-            record(data, info)
-            self.take_waiting()
-
-        subscription = self.create_subscription(self.kit[topic.type], name, on_message, profile, raw=True)
-        self.recorded.append((topic, subscription, record))
-        # /clock first, then odom: every message taken in a round is logged at the newest sim time
-        self.recorded.sort(key=lambda entry: (entry[0] is not CLOCK, entry[0] is not ODOM))
-
-    def take_waiting(self) -> None:
-        """Record every message already waiting in any subscription, /clock and odom first.
-
-        A control step brings seven messages; taking all that wait per wake-up, and waking at most
-        every BATCH_PERIOD, keeps the recorder's cost per message low (on two cores it competes with
-        the simulator and the controller for the CPU). Log times stay non-decreasing in the bag.
-        """
-        for _, subscription, record in self.recorded:
-            while (taken := subscription.handle.take_message(subscription.msg_type, True)) is not None:
-                record(*taken)
+    def take_round(self) -> int:
+        """Take every message waiting in any subscription and write it; returns how many there were."""
+        batches = []
+        for name, is_clock, handle, msg_type, delivered in self._recorded:
+            batch = [(info['source_timestamp'] or info['received_timestamp'], name, is_clock, data, info)
+                     for data, info in delivered]
+            delivered.clear()
+            while (taken := handle.take_message(msg_type, True)) is not None:
+                data, info = taken
+                batch.append((info['source_timestamp'] or info['received_timestamp'], name, is_clock, data, info))
+            if batch:
+                batches.append(batch)
+        if not batches:
+            return 0
+        count = 0
+        write, sequences = self.writer.write_serialized, self._sequences
+        for published, name, is_clock, data, info in heapq.merge(*batches, key=_source_time):
+            if is_clock:
+                self.clock_ns = _clock_ns(data)
+            sequence, publisher = info.get('publication_sequence_number'), info.get('publisher_gid')
+            if sequence is not None and publisher is not None:
+                key = (name, publisher['data'])
+                last = sequences.get(key)
+                if last is not None and sequence > last + 1:
+                    self.lost += sequence - last - 1
+                sequences[key] = sequence
+            write(name, data, published if self.clock_ns is None else self.clock_ns, published)
+            count += 1
+        self.received += count
+        return count
 
     def open_gate(self) -> None:
         """Subscribe to every odom once every recorded per-step topic of the controllers has a discovered publisher."""
@@ -130,36 +161,48 @@ class RecorderNode(Node):
             self.subscribe(name, ODOM)
         self.get_logger().info('controller publishers discovered; recording odom')
 
+    def finish(self) -> None:
+        """Finalize the bag (with the count of lost messages, if any) and say what it holds."""
+        if self.lost:
+            self.writer.custom_data['lost_messages'] = str(self.lost)
+        self.writer.close()
+        lost = f', {self.lost} LOST (gaps in the publishers\' sequence numbers)' if self.lost else ''
+        print(f'recorder: {self.received} messages written to {self.writer.path}{lost}', flush=True)
+
 
 def main(argv: list[str] | None = None) -> int:
-    """Take what arrives (in rounds, see :meth:`RecorderNode.take_waiting`) until SIGINT/SIGTERM, then
-    drain what is still arriving and finalize the bag."""
+    """Take what waits every ROUND_PERIOD (see :meth:`RecorderNode.take_round`) until SIGINT/SIGTERM, then
+    until nothing has arrived for QUIET_TIME, and finalize the bag; exit 1 if messages were lost."""
     signals = init_ros(argv)
     node = None
     try:
         node = RecorderNode(rclpy_kit())
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while not signals and executor.context.ok():
-            executor.spin_once(timeout_sec=0.0)
-            time.sleep(BATCH_PERIOD)
-        quiet_since = time.monotonic()
-        while time.monotonic() - quiet_since < 0.3:
-            before = node.received
-            executor.spin_once(timeout_sec=0.05)
-            if node.received != before:
-                quiet_since = time.monotonic()
+        freeze_long_lived_objects()     # no long garbage-collector pause while the flight runs
+        next_spin = time.monotonic()
+        stopping_since = None    # wall time of the signal, then of the latest message after it
+        while executor.context.ok():
+            time.sleep(ROUND_PERIOD)
+            now = time.monotonic()
+            if now >= next_spin:
+                executor.spin_once(timeout_sec=0.0)
+                next_spin = now + SPIN_PERIOD
+            taken = node.take_round()
+            if signals:
+                if stopping_since is None or taken:
+                    stopping_since = now
+                elif now - stopping_since >= QUIET_TIME:
+                    break
     except ParameterError as error:
         print(f'[FATAL] invalid parameter: {error}', file=sys.stderr, flush=True)
         return 2
     finally:
         if node is not None:
-            node.writer.close()
-            dropped = f', {node.writer.dropped} DROPPED (writer queue full)' if node.writer.dropped else ''
-            print(f'recorder: {node.received} messages written to {node.writer.path}{dropped}', flush=True)
+            node.finish()
             node.destroy_node()
         rclpy.try_shutdown()
-    return 1 if node is not None and node.writer.dropped else 0
+    return 1 if node is not None and node.lost else 0
 
 
 if __name__ == '__main__':
