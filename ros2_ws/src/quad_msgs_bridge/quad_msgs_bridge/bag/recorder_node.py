@@ -49,7 +49,7 @@ from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 RECORD_DEPTH = 10000     #: reader history per topic: rounds ROUND_PERIOD apart never let it overflow
-ROUND_PERIOD = 0.005     #: [s, wall] the recorder takes what waits this often
+ROUND_PERIOD = 0.01      #: [s, wall] the recorder takes what waits this often
 SPIN_PERIOD = 0.05       #: [s, wall] timers, services and discovery are served this often
 QUIET_TIME = 0.3         #: [s, wall] after SIGINT/SIGTERM, stop once nothing has arrived for this long
 
@@ -118,7 +118,9 @@ class RecorderNode(Node):
         delivered: list = []   # what the executor hands over between rounds (when it spins for timers)
         subscription = self.create_subscription(self.kit[topic.type], name,
                                                 lambda data, info: delivered.append((data, info)), profile, raw=True)
-        self._recorded.append((name, topic is CLOCK, subscription.handle, subscription.msg_type, delivered))
+        entry = (name, topic is CLOCK, subscription.handle, subscription.msg_type, delivered)
+        # /clock first: of messages with the same source timestamp, a /clock is taken to come first
+        self._recorded.insert(0 if topic is CLOCK else len(self._recorded), entry)
 
     def take_round(self) -> int:
         """Take every message waiting in any subscription and write it; returns how many there were."""
