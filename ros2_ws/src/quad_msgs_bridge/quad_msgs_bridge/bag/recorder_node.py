@@ -3,17 +3,19 @@
 Every subscription is raw: the recorder gets the serialized CDR bytes that the publisher sent and
 writes them into the MCAP file as they are, never decoding or re-encoding a message. It does not
 wake per message either: every ``ROUND_PERIOD`` it takes what waits in every subscription's history
-(``RECORD_DEPTH`` deep, reliable) and writes it in one go; the MCAP chunks are compressed and
-written by the file's background thread. A lockstep flight never waits for the recorder (the
-simulator waits for the controllers only), so the recorder's whole cost to the flight is the CPU it
-takes from the simulator and the controllers, and the DDS delivery of one more reader.
+(``RECORD_DEPTH`` deep, reliable); the MCAP chunks are compressed and written by the file's
+background thread. A lockstep flight never waits for the recorder (the simulator waits for the
+controllers only), so the recorder's cost to the flight is the CPU it takes from the simulator and
+the controllers, and the DDS delivery to one more reader.
 
 Each message has two times. The publish time is the wall time the publisher sent it (DDS source
-timestamp). The log time is the sim time of the latest ``/clock`` published before it: the
-messages taken in a round are merged in the order of their source timestamps (each topic keeps its
-own order), so a control step's messages are logged at its step's sim time, as a node under
-``use_sim_time`` would read its clock when publishing them (0 before the first ``/clock``; wall
-time if ``/clock`` is not recorded). Log times never decrease.
+timestamp). The log time is the sim time of the latest ``/clock`` published before it (0 before the
+first one, as a ROS clock under ``use_sim_time`` reads; the publish time if ``/clock`` is not
+recorded): the recorder holds what it took for ``HOLD_NS`` and writes it in the order of the source
+timestamps (each topic in its own order), since two topics' messages may reach it in another order
+than they were sent (a repaired /clock message came 56 ms late here). So a control step's odometry
+is logged at its stamp, the controller's answers at that stamp or, where the simulator's next
+``/clock`` went out before them, at the next one. Log times never decrease while /clock does not.
 
 Nothing is lost unnoticed: each publisher numbers its messages (DDS publication sequence number),
 and a gap in what the recorder took is counted, reported at the end, stored in the bag metadata
@@ -28,10 +30,9 @@ killed recorder leaves a bag readable up to its last complete chunk (``recover``
 """
 from __future__ import annotations
 
-import heapq
+import bisect
 import sys
 import time
-from operator import itemgetter
 
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -50,11 +51,10 @@ from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 RECORD_DEPTH = 10000     #: reader history per topic: rounds ROUND_PERIOD apart never let it overflow
 ROUND_PERIOD = 0.01      #: [s, wall] the recorder takes what waits this often
+HOLD_NS = 500_000_000    #: [ns, wall] a message is written once it was published this long ago (a message
+                         #: of another topic published before it may still be on its way)
 SPIN_PERIOD = 0.05       #: [s, wall] timers, services and discovery are served this often
 QUIET_TIME = 0.3         #: [s, wall] after SIGINT/SIGTERM, stop once nothing has arrived for this long
-
-_source_time = itemgetter(0)
-
 
 def _clock_ns(cdr: bytes) -> int:
     """Sim time [ns] of a rosgraph_msgs/Clock in CDR: 4-byte encapsulation header, int32 sec, uint32 nanosec."""
@@ -95,6 +95,9 @@ class RecorderNode(Node):
         self.lost = 0                                 #: messages missing between publication sequence numbers
         self._sequences: dict[tuple, int] = {}        #: (topic, publisher gid) -> last publication sequence number
         self._recorded: list[tuple] = []              #: (name, is_clock, subscription handle, type, delivered)
+        self._published: dict[str, int] = {}          #: topic -> source timestamp of its latest message [ns]
+        self._waiting: list[tuple] = []               #: taken, not yet written, in the order of publication
+        self._arrivals = 0
         for name, topic in resolve_all(self.topics, self.namespaces):
             if topic is not ODOM:
                 self.subscribe(name, topic)
@@ -123,35 +126,60 @@ class RecorderNode(Node):
         self._recorded.insert(0 if topic is CLOCK else len(self._recorded), entry)
 
     def take_round(self) -> int:
-        """Take every message waiting in any subscription and write it; returns how many there were."""
-        batches = []
+        """Take every message waiting in any subscription; write, in the order they were published, those
+        published more than HOLD_NS ago. Returns how many messages were taken."""
+        taken = self.take()
+        self.write_held(time.time_ns() - HOLD_NS)
+        return taken
+
+    def take(self) -> int:
+        """Take every message waiting in any subscription into the held messages; returns how many."""
+        waiting, taken = self._waiting, 0
         for name, is_clock, handle, msg_type, delivered in self._recorded:
-            batch = [(info['source_timestamp'] or info['received_timestamp'], name, is_clock, data, info)
-                     for data, info in delivered]
+            messages = delivered[:]
             delivered.clear()
-            while (taken := handle.take_message(msg_type, True)) is not None:
-                data, info = taken
-                batch.append((info['source_timestamp'] or info['received_timestamp'], name, is_clock, data, info))
-            if batch:
-                batches.append(batch)
-        if not batches:
-            return 0
-        count = 0
-        write, sequences = self.writer.write_serialized, self._sequences
-        for published, name, is_clock, data, info in heapq.merge(*batches, key=_source_time):
+            while (message := handle.take_message(msg_type, True)) is not None:
+                messages.append(message)
+            if not messages:
+                continue
+            published = self._published.get(name, 0)
+            order = 0 if is_clock else 1      # of messages published at the same instant, /clock comes first
+            for data, info in messages:
+                self.check_sequence(name, info)
+                # never earlier than the topic's previous message: each topic keeps its own order
+                published = max(published, info['source_timestamp'] or info['received_timestamp'])
+                waiting.append((published, order, self._arrivals, name, is_clock, data))
+                self._arrivals += 1
+            self._published[name] = published
+            taken += len(messages)
+        if taken:
+            waiting.sort()
+        return taken
+
+    def write_held(self, published_before: float) -> None:
+        """Write the held messages published before ``published_before`` [ns, wall], in the order of publication."""
+        waiting = self._waiting
+        ready = bisect.bisect_left(waiting, (published_before,))
+        if not ready:
+            return
+        write = self.writer.write_serialized
+        for published, _, _, name, is_clock, data in waiting[:ready]:
             if is_clock:
                 self.clock_ns = _clock_ns(data)
-            sequence, publisher = info.get('publication_sequence_number'), info.get('publisher_gid')
-            if sequence is not None and publisher is not None:
-                key = (name, publisher['data'])
-                last = sequences.get(key)
-                if last is not None and sequence > last + 1:
-                    self.lost += sequence - last - 1
-                sequences[key] = sequence
             write(name, data, published if self.clock_ns is None else self.clock_ns, published)
-            count += 1
-        self.received += count
-        return count
+        del waiting[:ready]
+        self.received += ready
+
+    def check_sequence(self, name: str, info: dict) -> None:
+        """Count the messages missing before this one of its publisher (a gap in its sequence numbers)."""
+        sequence, publisher = info.get('publication_sequence_number'), info.get('publisher_gid')
+        if sequence is None or publisher is None:   # an rmw that does not number its messages
+            return
+        key = (name, publisher['data'])
+        last = self._sequences.get(key)
+        if last is not None and sequence > last + 1:
+            self.lost += sequence - last - 1
+        self._sequences[key] = sequence
 
     def open_gate(self) -> None:
         """Subscribe to every odom once every recorded per-step topic of the controllers has a discovered publisher."""
@@ -164,7 +192,10 @@ class RecorderNode(Node):
         self.get_logger().info('controller publishers discovered; recording odom')
 
     def finish(self) -> None:
-        """Finalize the bag (with the count of lost messages, if any) and say what it holds."""
+        """Write what is still held, finalize the bag (with the count of lost messages, if any), say what it holds."""
+        if self.context.ok():
+            self.take()
+        self.write_held(float('inf'))
         if self.lost:
             self.writer.custom_data['lost_messages'] = str(self.lost)
         self.writer.close()
