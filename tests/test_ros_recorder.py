@@ -140,7 +140,7 @@ def test_a_killed_recorder_leaves_a_readable_prefix_of_the_flight(tmp_path):
     recorder = processes[0]
     try:
         deadline = time.monotonic() + 180.0
-        while time.monotonic() < deadline and mcap_size(bag) < 2 ** 20:   # several chunks (1 MiB each before compression)
+        while time.monotonic() < deadline and mcap_size(bag) < 2 ** 20:   # chunks of 1 MiB before compression
             assert recorder.returncode is None, '\n'.join(recorder.lines)
             time.sleep(0.2)
         assert mcap_size(bag) >= 2 ** 20, 'the recording did not grow'
@@ -200,7 +200,8 @@ def info(published: int, sequence: int, publisher: bytes = b'p') -> dict:
 
 def test_a_round_merges_by_publish_time_logs_at_the_latest_clock_and_counts_gaps(tmp_path):
     """Messages taken in one round are written in the order they were published (each topic in its own order),
-    at the sim time of the /clock published before each; a gap in a publisher's sequence numbers is counted."""
+    at the sim time of the /clock published before each, once a /clock published after them has come; a gap in a
+    publisher's sequence numbers is counted."""
     from quad_msgs_bridge.bag.recorder_node import RecorderNode
     from quad_msgs_bridge.fast_cdr import clock_encoder
 
@@ -221,7 +222,15 @@ def test_a_round_merges_by_publish_time_logs_at_the_latest_clock_and_counts_gaps
         assert node.take_round() == 6
         assert node.take_round() == 0
         assert node.lost == 2                        # 9 and 10 of publisher c never arrived
-        node.finish()
+        assert node.received == 6
+        # a message published 2 s ago, after the latest /clock taken, waits for a /clock published after it
+        late_forces, late_clock = time.time_ns() - 2 * NANOSECONDS_PER_SECOND, time.time_ns() - 1_900_000_000
+        handles['/roundcheck/rotor_forces'].messages.append((b'forces-4', info(late_forces, 12, b'c')))
+        assert node.take_round() == 1 and node.received == 6
+        handles['/clock'].messages.append((clock(3, 0), info(late_clock, 3)))
+        assert node.take_round() == 1 and node.received == 7
+        node.finish()                                # the rest is written at the end
+        assert node.received == 8
     finally:
         if node is not None:
             node.destroy_node()
@@ -233,5 +242,7 @@ def test_a_round_merges_by_publish_time_logs_at_the_latest_clock_and_counts_gaps
     forces_topic = '/roundcheck/rotor_forces'
     assert written == [(forces_topic, 0, 50, forces[0]), ('/clock', second, 100, clock(1, 0)),
                        (forces_topic, second, 150, forces[1]), ('/clock', 2 * second, 200, clock(2, 0)),
-                       (forces_topic, 2 * second, 250, forces[2]), (forces_topic, 2 * second, 260, forces[3])]
+                       (forces_topic, 2 * second, 250, forces[2]), (forces_topic, 2 * second, 260, forces[3]),
+                       (forces_topic, 2 * second, late_forces, b'forces-4'),
+                       ('/clock', 3 * second, late_clock, clock(3, 0))]
     assert read_metadata(tmp_path / 'bag')['custom_data']['lost_messages'] == '2'

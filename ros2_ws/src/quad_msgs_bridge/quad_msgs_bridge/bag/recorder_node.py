@@ -11,11 +11,13 @@ the controllers, and the DDS delivery to one more reader.
 Each message has two times. The publish time is the wall time the publisher sent it (DDS source
 timestamp). The log time is the sim time of the latest ``/clock`` published before it (0 before the
 first one, as a ROS clock under ``use_sim_time`` reads; the publish time if ``/clock`` is not
-recorded): the recorder holds what it took for ``HOLD_NS`` and writes it in the order of the source
-timestamps (each topic in its own order), since two topics' messages may reach it in another order
-than they were sent (a repaired /clock message came 56 ms late here). So a control step's odometry
-is logged at its stamp, the controller's answers at that stamp or, where the simulator's next
-``/clock`` went out before them, at the next one. Log times never decrease while /clock does not.
+recorded): the recorder holds what it took until a ``/clock`` published after it has come (a
+publisher's messages arrive in order, so every /clock before it is there too), ``HOLD_NS`` at least
+(a message of another topic published before it may still be on its way) and ``CLOCK_WAIT_NS`` at
+most, and writes it in the order of the source timestamps (each topic in its own order): on a busy
+machine a message repaired by DDS came 560 ms late here. So a control step's odometry is logged at
+its stamp, the controller's answers at that stamp or, where the simulator's next ``/clock`` went out
+before them, at the next one. Log times never decrease while /clock does not.
 
 Nothing is lost unnoticed: each publisher numbers its messages (DDS publication sequence number),
 and a gap in what the recorder took is counted, reported at the end, stored in the bag metadata
@@ -52,7 +54,8 @@ from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 RECORD_DEPTH = 10000     #: reader history per topic: rounds ROUND_PERIOD apart never let it overflow
 ROUND_PERIOD = 0.01      #: [s, wall] the recorder takes what waits this often
 HOLD_NS = 500_000_000    #: [ns, wall] a message is written once it was published this long ago (a message
-                         #: of another topic published before it may still be on its way)
+                         #: of another topic published before it may still be on its way) ...
+CLOCK_WAIT_NS = 5 * HOLD_NS   #: [ns, wall] ... and a /clock published after it was taken, or this long ago
 SPIN_PERIOD = 0.05       #: [s, wall] timers, services and discovery are served this often
 QUIET_TIME = 0.3         #: [s, wall] after SIGINT/SIGTERM, stop once nothing has arrived for this long
 
@@ -98,6 +101,7 @@ class RecorderNode(Node):
         self._published: dict[str, int] = {}          #: topic -> source timestamp of its latest message [ns]
         self._waiting: list[tuple] = []               #: taken, not yet written, in the order of publication
         self._arrivals = 0
+        self._clock_published = 0                     #: source timestamp of the newest /clock taken [ns]
         for name, topic in resolve_all(self.topics, self.namespaces):
             if topic is not ODOM:
                 self.subscribe(name, topic)
@@ -129,7 +133,11 @@ class RecorderNode(Node):
         """Take every message waiting in any subscription; write, in the order they were published, those
         published more than HOLD_NS ago. Returns how many messages were taken."""
         taken = self.take()
-        self.write_held(time.time_ns() - HOLD_NS)
+        now = time.time_ns()
+        if self.clock_ns is None:
+            self.write_held(now - HOLD_NS)
+        else:   # a /clock publisher's messages arrive in order: all /clock before this one are here
+            self.write_held(max(min(self._clock_published, now - HOLD_NS), now - CLOCK_WAIT_NS))
         return taken
 
     def take(self) -> int:
@@ -151,6 +159,8 @@ class RecorderNode(Node):
                 waiting.append((published, order, self._arrivals, name, is_clock, data))
                 self._arrivals += 1
             self._published[name] = published
+            if is_clock:
+                self._clock_published = published
             taken += len(messages)
         if taken:
             waiting.sort()
