@@ -7,6 +7,7 @@ from __future__ import annotations
 import math
 import signal
 import sys
+import time
 from dataclasses import replace
 from typing import Any, Callable, Sequence
 
@@ -90,10 +91,13 @@ def declare(node: Node, name: str, default: Any, description: str,
 
 def wait_for_acknowledgements(node: Node, timeout: float = 2.0) -> None:
     """Wait until every reliable subscriber (a recorder) has acknowledged all that ``node`` published, at most
-    ``timeout`` [s, wall] per publisher: a node that exits right after its last message would otherwise take
-    it away from a subscriber that has not yet read it (Fast DDS' shared memory belongs to the publisher)."""
+    ``timeout`` [s, wall] in all: a node that exits right after its last message would otherwise take it away
+    from a subscriber that has not yet read it (Fast DDS' shared memory belongs to the publisher)."""
+    deadline = time.monotonic() + timeout
     for publisher in node.publishers:
-        publisher.wait_for_all_acked(Duration(seconds=timeout))
+        left = deadline - time.monotonic()
+        if left <= 0.0 or not publisher.wait_for_all_acked(Duration(seconds=left)):
+            return
 
 
 def init_ros(argv: list[str] | None = None) -> list[int]:
