@@ -3,18 +3,29 @@
 
 Prints: the ping-pong round trips/s (the ceiling of one simulator-controller pair); then, for each
 fleet size of --vehicles (one simulator, a trajectory and a controller node per vehicle), the lockstep
-paper flight's steps/s without the recorder, without the recorder and without TF, and with the
-recorder, each as a share of that ceiling; for the recorded flight, each vehicle's odometry-to-force
-latency (median, p99, from the recorded publish times) and its largest difference from the embedded
-flight of that vehicle alone (same offset copy of the scenario) in any odometry value and in each
-summary metric.
-Needs a sourced ROS 2. Usage: python3 bench/bench_ros_lockstep.py [--duration S] [--controller NAME]
-[--vehicles N [N ...]]
+paper flight's steps/s without the recorder, without the recorder and without TF (where tf2_msgs is
+installed), and with the recorder, each as a share of that ceiling; for the first recorded flight,
+each vehicle's odometry-to-force latency (median, p99, from the recorded publish times) and its
+largest difference from the embedded flight of that vehicle alone (same offset copy of the scenario)
+in any odometry value and in each summary metric.
+
+--repeats N flies everything N times in turns (the ping-pong too) and ends with a table of the best
+run of each (the least disturbed by other load on the machine) and the median, as shares of the
+ceiling, with the recording overhead (1 - rate with the recorder / rate without). --against TREE
+also flies every flight with the source tree at TREE (e.g. a checkout of an older commit), in turns
+with this one: a before/after comparison side by side in one run. Each flight runs in its own Python
+process with its tree's packages on the path.
+
+Needs rclpy (a sourced ROS 2, or the ROS 2 wheels). Usage: python3 bench/bench_ros_lockstep.py
+[--duration S] [--controller NAME] [--vehicles N [N ...]] [--repeats N] [--against TREE] [--skip-embedded]
 """
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import json
 import re
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -29,12 +40,11 @@ from mcap.reader import make_reader  # noqa: E402
 import flight_stack  # noqa: E402,F401
 from flight_stack.embedded import fly_embedded  # noqa: E402
 from flight_stack.fleet import FleetVehicle, fleet_layout  # noqa: E402
-from flight_stack.ros_backend import RosFlightConfig, fly_ros  # noqa: E402
 from nnit2fsmc_controller.factory import load_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
 from quad_msgs_bridge.bag.reader import mcap_file  # noqa: E402
 from quad_msgs_bridge.bag.timing import message_timing  # noqa: E402
-from quad_msgs_bridge.contract import ODOM, RECORDED_TOPICS, resolve  # noqa: E402
+from quad_msgs_bridge.contract import ODOM, resolve  # noqa: E402
 from quad_msgs_bridge.fast_cdr import decode_odometry  # noqa: E402
 from quad_msgs_bridge.bag.flight_bag import FlightBag  # noqa: E402
 from quad_msgs_bridge.review.flight_from_bag import read_flight  # noqa: E402
@@ -44,12 +54,46 @@ from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
 NAMESPACE = 'bench'
 SETTLE_TIME = 5.0
 
+#: one lockstep flight with the packages of the tree in argv[1]; argv[2]: its settings as JSON; prints its steps/s
+FLIGHT = """
+import json, re, sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+import flight_stack
+from flight_stack.fleet import fleet_layout
+from flight_stack.ros_backend import RosFlightConfig, fly_ros
+from quad_msgs_bridge.contract import RECORDED_TOPICS
+s = json.loads(sys.argv[2])
+result = fly_ros(RosFlightConfig(
+    vehicles=fleet_layout(s['vehicles'], s['namespace']), controller=s['controller'], scenario='paper',
+    duration=s['duration'], disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0, bag=Path(s['bag']),
+    topics=[t.name for t in RECORDED_TOPICS], settle_time=s['settle_time'], quiet=True, record=s['record'],
+    publish_tf=s['tf']))
+if result.failed_node:
+    sys.exit(f'flight failed: {result}')
+print('RATE', re.search(r'([0-9.]+) steps/s', result.sim_report).group(1))
+"""
 
-def steps_per_second(report: str) -> float:
-    match = re.search(r'([0-9.]+) steps/s', report)
-    if not match:
-        raise RuntimeError(f'no rate in the simulator report: {report!r}')
+
+def fly_lockstep(tree: Path, vehicles: int, controller: str, duration: float, bag: Path, record: bool,
+                 tf: bool) -> float:
+    """Steps/s of one lockstep paper flight of ``vehicles`` flown with the source tree at ``tree``."""
+    settings = dict(vehicles=vehicles, namespace=NAMESPACE, controller=controller, duration=duration, bag=str(bag),
+                    settle_time=SETTLE_TIME, record=record, tf=tf)
+    done = subprocess.run([sys.executable, '-c', FLIGHT, str(tree), json.dumps(settings)], capture_output=True,
+                          text=True)
+    match = re.search(r'^RATE ([0-9.]+)$', done.stdout, re.MULTILINE)
+    if done.returncode != 0 or not match:
+        raise RuntimeError(f'flight with {tree} failed ({done.returncode}): {done.stdout[-2000:]}{done.stderr[-2000:]}')
     return float(match.group(1))
+
+
+def pingpong_ceiling() -> float:
+    """Round trips/s of the bare rclpy ping-pong (printed as it reports)."""
+    pingpong = subprocess.run([sys.executable, str(ROOT / 'bench' / 'bench_ros_pingpong.py')],
+                              capture_output=True, text=True, check=True).stdout
+    print(pingpong.rstrip(), flush=True)
+    return float(re.search(r'([0-9.]+) round trips/s', pingpong).group(1))
 
 
 def odometry_values(bag: Path, namespace: str) -> np.ndarray:
@@ -86,38 +130,66 @@ def compare_with_embedded(ros_bag: Path, vehicle: FleetVehicle, controller: str,
               f'difference {abs(metrics[0]["chattering"][name] - value):.3g}')
 
 
+def print_table(ceilings: list[float], rates: dict, trees: list[tuple[str, Path]], repeats: int) -> None:
+    """The best and median run of each flight against the best and median ceiling, with the recording overhead."""
+    best_ceiling, median_ceiling = max(ceilings), statistics.median(ceilings)
+    print(f'\nsummary of {repeats} run(s) in turns: best (least disturbed) and median; ping-pong ceiling best '
+          f'{best_ceiling:.0f}, median {median_ceiling:.0f} round trips/s')
+    print(f'{"vehicles":>8}  {"tree":<8} {"flight":<19} {"best steps/s":>12} {"% ceiling":>9} '
+          f'{"median":>8} {"% ceiling":>9}  recording overhead best / median')
+    for (count, tree, label), values in rates.items():
+        best, median = max(values), statistics.median(values)
+        line = (f'{count:>8}  {tree:<8} {label:<19} {best:12.0f} {100 * best / best_ceiling:8.1f}% '
+                f'{median:8.0f} {100 * median / median_ceiling:8.1f}%')
+        bare = rates.get((count, tree, 'no recorder'))
+        if label == 'with recorder' and bare:
+            line += f'  {100 * (1 - best / max(bare)):5.1f} % / {100 * (1 - median / statistics.median(bare)):5.1f} %'
+        print(line)
+    if len(trees) > 1:
+        print('trees: ' + ', '.join(f'{name} = {path}' for name, path in trees))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--duration', type=float, default=10.0)
     parser.add_argument('--controller', default='nnit2fsmc')
     parser.add_argument('--vehicles', type=int, nargs='+', default=[1], metavar='N', help='fleet sizes to fly')
+    parser.add_argument('--repeats', type=int, default=1, help='fly everything this many times, in turns')
+    parser.add_argument('--against', type=Path, metavar='TREE',
+                        help='also fly with the source tree at TREE, in turns with this one (before/after)')
+    parser.add_argument('--skip-embedded', action='store_true',
+                        help='no latency figures and no comparison with the embedded flight')
     args = parser.parse_args()
-    pingpong = subprocess.run([sys.executable, str(ROOT / 'bench' / 'bench_ros_pingpong.py')],
-                              capture_output=True, text=True, check=True).stdout
-    ceiling = float(re.search(r'([0-9.]+) round trips/s', pingpong).group(1))
-    print(pingpong.rstrip())
-    for count in args.vehicles:
-        vehicles = fleet_layout(count, NAMESPACE)
-        for label, record, tf in (('no recorder', False, True), ('no recorder, no TF', False, False),
-                                  ('with recorder', True, True)):
-            with tempfile.TemporaryDirectory() as tmp:
-                result = fly_ros(RosFlightConfig(
-                    vehicles=vehicles, controller=args.controller, scenario='paper', duration=args.duration,
-                    disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0, bag=Path(tmp) / 'bag',
-                    topics=[t.name for t in RECORDED_TOPICS], settle_time=SETTLE_TIME, quiet=True, record=record,
-                    publish_tf=tf))
-                if result.failed_node:
-                    raise RuntimeError(f'flight failed: {result}')
-                rate = steps_per_second(result.sim_report)
-                print(f'lockstep {args.controller}, {count} vehicle(s), {label:18s}: {rate:7.0f} steps/s = '
-                      f'{100 * rate / ceiling:5.1f} % of the ping-pong ceiling')
-                if record:
-                    for vehicle in vehicles:
-                        timing = message_timing(Path(tmp) / 'bag', vehicle.namespace)
-                        print(f'  {vehicle.namespace}: odom->forces latency median {timing["latency_median_ms"]:.3f} '
-                              f'ms, p99 {timing["latency_p99_ms"]:.3f} ms')
-                    for vehicle in vehicles:
-                        compare_with_embedded(Path(tmp) / 'bag', vehicle, args.controller, args.duration, Path(tmp))
+    trees = [('this', ROOT)] + ([('against', args.against.resolve())] if args.against else [])
+    flights = [('no recorder', False, True)]
+    if importlib.util.find_spec('tf2_msgs') is not None:   # without tf2_msgs no flight has TF: nothing to compare
+        flights.append(('no recorder, no TF', False, False))
+    flights.append(('with recorder', True, True))
+    ceilings: list[float] = []
+    rates: dict[tuple, list[float]] = {}
+    for repeat in range(args.repeats):
+        ceiling = pingpong_ceiling()
+        ceilings.append(ceiling)
+        for count in args.vehicles:
+            vehicles = fleet_layout(count, NAMESPACE)
+            for label, record, tf in flights:
+                for tree_name, tree in trees:
+                    with tempfile.TemporaryDirectory() as tmp:
+                        bag = Path(tmp) / 'bag'
+                        rate = fly_lockstep(tree, count, args.controller, args.duration, bag, record, tf)
+                        rates.setdefault((count, tree_name, label), []).append(rate)
+                        print(f'lockstep {args.controller}, {count} vehicle(s), {tree_name:<7} {label:18s}: '
+                              f'{rate:7.0f} steps/s = {100 * rate / ceiling:5.1f} % of the ping-pong ceiling',
+                              flush=True)
+                        if record and repeat == 0 and tree_name == 'this' and not args.skip_embedded:
+                            for vehicle in vehicles:
+                                timing = message_timing(bag, vehicle.namespace)
+                                print(f'  {vehicle.namespace}: odom->forces latency median '
+                                      f'{timing["latency_median_ms"]:.3f} ms, p99 {timing["latency_p99_ms"]:.3f} ms')
+                            for vehicle in vehicles:
+                                compare_with_embedded(bag, vehicle, args.controller, args.duration, Path(tmp))
+    if args.repeats > 1 or args.against:
+        print_table(ceilings, rates, trees, args.repeats)
 
 
 if __name__ == '__main__':

@@ -5,7 +5,7 @@ Process A publishes nav_msgs/Odometry and waits for the std_msgs/Float64MultiArr
 process B sends back for it, then sends the next: the same traffic pattern as one lockstep step,
 with no simulation or control work. QoS: the contract's lockstep profile (`contract.LOCKSTEP`).
 
-Needs a sourced ROS 2 (source /opt/ros/jazzy/setup.bash). Usage: python3 bench/bench_ros_pingpong.py [--count N]
+Needs rclpy (a sourced ROS 2, or the ROS 2 wheels). Usage: python3 bench/bench_ros_pingpong.py [--count N]
 """
 from __future__ import annotations
 
@@ -24,19 +24,20 @@ from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from quad_msgs_bridge.contract import LOCKSTEP  # noqa: E402
-from quad_msgs_bridge.ros_helpers import qos_profile  # noqa: E402
+from quad_msgs_bridge.ros_helpers import init_ros, qos_profile, spin_until_stopped  # noqa: E402
 
 
 def pong() -> None:
-    rclpy.init()
+    signals = init_ros()    # SIGTERM ends the spin, not rclpy's handler in the middle of a wait
     node = rclpy.create_node('pingpong_pong')
     publisher = node.create_publisher(Float64MultiArray, 'pong', qos_profile(LOCKSTEP))
     answer = Float64MultiArray(data=[1.0, 2.0, 3.0, 4.0])
     node.create_subscription(Odometry, 'ping', lambda msg: publisher.publish(answer), qos_profile(LOCKSTEP))
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
-        pass
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spin_until_stopped(executor, signals)
+    node.destroy_node()
+    rclpy.try_shutdown()
 
 
 def ping(count: int, warmup: int) -> None:

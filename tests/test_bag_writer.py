@@ -4,7 +4,6 @@ import errno
 import os
 import shutil
 import tempfile
-import threading
 from pathlib import Path
 
 import pytest
@@ -133,18 +132,16 @@ class FillingDisk:
         self.file.close()
 
 
-@pytest.mark.parametrize('queue_size', [0, 20_000])
-def test_a_disk_filling_up_while_recording_is_a_clear_error_not_a_hang(tmp_path, monkeypatch, queue_size):
+def test_a_disk_filling_up_while_recording_is_a_clear_error_not_a_hang(tmp_path, monkeypatch):
     monkeypatch.setattr(mcap_file, 'open', lambda path, mode: FillingDisk(path, 50_000), raising=False)
-    writer = BagWriter(tmp_path / 'bag', TOPICS, chunk_size=32 * 1024, queue_size=queue_size)
+    writer = BagWriter(tmp_path / 'bag', TOPICS, chunk_size=32 * 1024)
     raised = []
     try:
         for topic, data, stamp in sample_messages(5000):
             writer.write_serialized(topic, data, stamp)
     except BagWriteError as error:
         raised.append(error)
-    if not queue_size:              # written directly, the failing write itself raises (queued: it may)
-        assert raised, 'writing to a full disk raised nothing'
+    assert raised, 'writing to a full disk raised nothing'
     with pytest.raises(BagWriteError) as error:
         writer.close()
     assert error.value.errno == errno.ENOSPC
@@ -155,37 +152,17 @@ def test_a_disk_filling_up_while_recording_is_a_clear_error_not_a_hang(tmp_path,
     assert sum(1 for _ in prefix.records()) > 100 and not prefix.complete   # readable up to the last chunk
 
 
-# --- the queued writer thread ----------------------------------------------------------------------
+# --- what a recorder adds before closing ------------------------------------------------------------
 
-def test_the_writer_thread_records_the_same_bag(tmp_path):
-    record(tmp_path / 'direct', 3000, chunk_size=64 * 1024)
-    record(tmp_path / 'queued', 3000, chunk_size=64 * 1024, queue_size=6000)
-    assert read_back(tmp_path / 'queued') == read_back(tmp_path / 'direct')
-    assert len(read_back(tmp_path / 'direct')) == 6000
-
-
-def test_a_full_queue_drops_and_counts_instead_of_blocking(tmp_path):
-    writer = BagWriter(tmp_path / 'bag', TOPICS, queue_size=5)
-    entered, release = threading.Event(), threading.Event()
-    add_message = writer._file.add_message
-
-    def stuck_disk(*args):
-        entered.set()
-        release.wait(10.0)
-        add_message(*args)
-    writer._file.add_message = stuck_disk
-    messages = list(sample_messages(10))
-    writer.write_serialized(*messages[0])
-    assert entered.wait(10.0)           # the writer thread holds message 0 and waits on the "disk"
-    for message in messages[1:]:
-        writer.write_serialized(*message)   # returns at once: 5 queued, the rest dropped
-    assert writer.dropped == len(messages) - 1 - 5
-    release.set()
+def test_custom_data_added_before_close_is_in_the_final_metadata(tmp_path):
+    writer = BagWriter(tmp_path / 'bag', TOPICS, custom_data={'controller': 'pid'})
+    for message in sample_messages(10):
+        writer.write_serialized(*message)
+    writer.custom_data['lost_messages'] = '3'
     writer.close()
-    assert len(read_back(tmp_path / 'bag')) == 6
     information = read_metadata(tmp_path / 'bag')
-    assert information['message_count'] == 6
-    assert information['custom_data']['dropped_messages'] == str(writer.dropped)
+    assert information['message_count'] == 20
+    assert information['custom_data'] == {'controller': 'pid', 'lost_messages': '3'}
 
 
 # --- durability ------------------------------------------------------------------------------------

@@ -7,10 +7,12 @@ from __future__ import annotations
 import math
 import signal
 import sys
+import time
 from dataclasses import replace
 from typing import Any, Callable, Sequence
 
 import rclpy
+from rclpy.duration import Duration
 from rclpy.exceptions import InvalidParameterValueException, ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -87,6 +89,17 @@ def declare(node: Node, name: str, default: Any, description: str,
     return value
 
 
+def wait_for_acknowledgements(node: Node, timeout: float = 2.0) -> None:
+    """Wait until every reliable subscriber (a recorder) has acknowledged all that ``node`` published, at most
+    ``timeout`` [s, wall] in all: a node that exits right after its last message would otherwise take it away
+    from a subscriber that has not yet read it (Fast DDS' shared memory belongs to the publisher)."""
+    deadline = time.monotonic() + timeout
+    for publisher in node.publishers:
+        left = deadline - time.monotonic()
+        if left <= 0.0 or not publisher.wait_for_all_acked(Duration(seconds=left)):
+            return
+
+
 def init_ros(argv: list[str] | None = None) -> list[int]:
     """``rclpy.init`` with our own SIGINT/SIGTERM handling; returns the list the signals are appended to.
 
@@ -127,6 +140,8 @@ def run_node(make_node: Callable[[MessageKit], Node], argv: list[str] | None = N
         code = 2
     finally:
         if node is not None:
+            if node.context.ok():
+                wait_for_acknowledgements(node)
             node.destroy_node()
         rclpy.try_shutdown()
     return code

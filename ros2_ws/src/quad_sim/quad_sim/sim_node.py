@@ -32,7 +32,7 @@ from rclpy.node import Node
 from quad_msgs_bridge.contract import CLOCK, ODOM, ODOM_FRAME, ROTOR_FORCES, TF, base_frame, resolve, vehicle_namespaces
 from quad_msgs_bridge.conversions import MessageKit
 from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder, tf_encoder
-from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
+from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription, wait_for_acknowledgements
 from quad_msgs_bridge.timebase import stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
@@ -164,6 +164,7 @@ class SimNode(Node):
                 self.finished = True
                 self.get_logger().info(f'reached duration {self.duration:g} s of sim time; {self.timing_report()}')
                 if self.exit_at_end:
+                    wait_for_acknowledgements(self)   # a recorder gets the last steps before the node goes
                     rclpy.shutdown(context=self.context)
             return True
         return False

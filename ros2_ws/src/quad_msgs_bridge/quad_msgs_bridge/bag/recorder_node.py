@@ -1,20 +1,38 @@
-"""record node: writes what goes over the contract topics into a rosbag2 MCAP bag.
+"""record node: writes what goes over the contract topics into a rosbag2 MCAP bag, at little cost to the flight.
 
-Messages are recorded as the serialized CDR bytes that arrived, with two times: the log time is
-the sim time of the latest ``/clock`` the recorder had taken when it took the message (0 before the
-first one, as a ROS clock under ``use_sim_time`` reads; wall time if ``/clock`` is not recorded;
-it takes what waits in rounds, ``/clock`` first, so log times never decrease), the publish time is
-the wall time the publisher sent it (DDS source timestamp), so a bag shows both the flight in sim
-time and the real message latencies.
+Every subscription is raw: the recorder gets the serialized CDR bytes that the publisher sent and
+writes them into the MCAP file as they are, never decoding or re-encoding a message. It does not
+wake per message either: every ``ROUND_PERIOD`` it takes what waits in every subscription's history
+(``RECORD_DEPTH`` deep, reliable); the MCAP chunks are compressed and written by the file's
+background thread. A lockstep flight never waits for the recorder (the simulator waits for the
+controllers only), so the recorder's cost to the flight is the CPU it takes from the simulator and
+the controllers, and the DDS delivery to one more reader.
+
+Each message has two times. The publish time is the wall time the publisher sent it (DDS source
+timestamp). The log time is the sim time of the latest ``/clock`` published before it (0 before the
+first one, as a ROS clock under ``use_sim_time`` reads; the publish time if ``/clock`` is not
+recorded): the recorder holds what it took until a ``/clock`` published after it has come (a
+publisher's messages arrive in order, so every /clock before it is there too), ``HOLD_NS`` at least
+(a message of another topic published before it may still be on its way) and ``CLOCK_WAIT_NS`` at
+most, and writes it in the order of the source timestamps (each topic in its own order): on a busy
+machine a message repaired by DDS came 560 ms late here. So a control step's odometry is logged at
+its stamp, the controller's answers at that stamp or, where the simulator's next ``/clock`` went out
+before them, at the next one. Log times never decrease while /clock does not.
+
+Nothing is lost unnoticed: each publisher numbers its messages (DDS publication sequence number),
+and a gap in what the recorder took is counted, reported at the end, stored in the bag metadata
+(``custom_data.lost_messages``) and makes the recorder exit 1.
 
 One recorder records a fleet: the contract topics of every vehicle of ``vehicles`` (namespaces
 relative to the node's, by default its own), ``/clock`` and ``/tf`` once. Per-step topics published
 by the controllers must be discovered before ``odom`` is subscribed: a lockstep simulator that waits
 for the recorder's ``odom`` subscriptions then starts only when nothing of the flight can be missed.
-SIGINT/SIGTERM stop it cleanly: everything already received is drained and the bag is finalized.
+SIGINT/SIGTERM stop it cleanly: everything still arriving is taken and the bag is finalized. A
+killed recorder leaves a bag readable up to its last complete chunk (``recover`` finalizes it).
 """
 from __future__ import annotations
 
+import bisect
 import sys
 import time
 
@@ -29,11 +47,22 @@ from quad_msgs_bridge.contract import (CLOCK, ODOM, RECORDED_TOPICS, SIMULATOR_T
 from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
 from quad_msgs_bridge.bag.flight_bag import flight_custom_data
 from quad_msgs_bridge.ros_helpers import declare, init_ros, qos_profile
+from quad_msgs_bridge.runtime import freeze_long_lived_objects
 from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
-RECORD_DEPTH = 10000   #: reader history: the recorder never drops a message it was sent
-BATCH_PERIOD = 0.002   #: [s, wall] the recorder wakes at most this often and takes everything waiting
+RECORD_DEPTH = 10000     #: reader history per topic: rounds ROUND_PERIOD apart never let it overflow
+ROUND_PERIOD = 0.01      #: [s, wall] the recorder takes what waits this often
+HOLD_NS = 500_000_000    #: [ns, wall] a message is written once it was published this long ago (a message
+                         #: of another topic published before it may still be on its way) ...
+CLOCK_WAIT_NS = 5 * HOLD_NS   #: [ns, wall] ... and a /clock published after it was taken, or this long ago
+SPIN_PERIOD = 0.05       #: [s, wall] timers, services and discovery are served this often
+QUIET_TIME = 0.3         #: [s, wall] after SIGINT/SIGTERM, stop once nothing has arrived for this long
+
+def _clock_ns(cdr: bytes) -> int:
+    """Sim time [ns] of a rosgraph_msgs/Clock in CDR: 4-byte encapsulation header, int32 sec, uint32 nanosec."""
+    return int.from_bytes(cdr[4:8], 'little', signed=True) * NANOSECONDS_PER_SECOND + \
+        int.from_bytes(cdr[8:12], 'little')
 
 
 class RecorderNode(Node):
@@ -41,7 +70,6 @@ class RecorderNode(Node):
         super().__init__('recorder')
         bag = declare(self, 'bag', '', 'bag directory to create (required)')
         topic_names = declare(self, 'topics', [t.name for t in RECORDED_TOPICS], 'contract topics to record')
-        queue_size = declare(self, 'queue_size', 100000, 'messages buffered for the writer thread', (1, 10 ** 7))
         overwrite = declare(self, 'overwrite', False, 'replace an existing bag at the same path')
         labels = {key: declare(self, key, '', f'{key} stored in the bag metadata')
                   for key in ('controller', 'scenario', 'disturbances')}
@@ -63,12 +91,17 @@ class RecorderNode(Node):
             {'vehicles': ','.join(self.namespaces)}
         custom = flight_custom_data(params, settle_time, backend='ros', seed=seed, **vehicles,
                                     **{k: v for k, v in labels.items() if v})
-        self.writer = BagWriter(bag, self.topics, self.namespaces, custom_data=custom, overwrite=overwrite,
-                                queue_size=queue_size)
+        self.writer = BagWriter(bag, self.topics, self.namespaces, custom_data=custom, overwrite=overwrite)
         self.kit = kit
         self.clock_ns: int | None = 0 if CLOCK in self.topics else None    #: sim time of the latest /clock [ns]
         self.received = 0
-        self.recorded: list = []
+        self.lost = 0                                 #: messages missing between publication sequence numbers
+        self._sequences: dict[tuple, int] = {}        #: (topic, publisher gid) -> last publication sequence number
+        self._recorded: list[tuple] = []              #: (name, is_clock, subscription handle, type, delivered)
+        self._published: dict[str, int] = {}          #: topic -> source timestamp of its latest message [ns]
+        self._waiting: list[tuple] = []               #: taken, not yet written, in the order of publication
+        self._arrivals = 0
+        self._clock_published = 0                     #: source timestamp of the newest /clock taken [ns]
         for name, topic in resolve_all(self.topics, self.namespaces):
             if topic is not ODOM:
                 self.subscribe(name, topic)
@@ -85,40 +118,78 @@ class RecorderNode(Node):
         return True
 
     def subscribe(self, name: str, topic: TopicSpec) -> None:
-        """Record ``topic`` under its absolute ``name``."""
+        """Record ``topic`` under its absolute ``name``: a raw subscription that the rounds take from."""
         qos = qos_profile(topic.qos)
         profile = QoSProfile(history=qos.history, depth=max(qos.depth, RECORD_DEPTH),
                              reliability=qos.reliability, durability=qos.durability)
-        is_clock = topic is CLOCK
+        delivered: list = []   # what the executor hands over between rounds (when it spins for timers)
+        subscription = self.create_subscription(self.kit[topic.type], name,
+                                                lambda data, info: delivered.append((data, info)), profile, raw=True)
+        entry = (name, topic is CLOCK, subscription.handle, subscription.msg_type, delivered)
+        # /clock first: of messages with the same source timestamp, a /clock is taken to come first
+        self._recorded.insert(0 if topic is CLOCK else len(self._recorded), entry)
 
-        def record(data: bytes, info) -> None:
-            now = time.time_ns()
-            if is_clock:   # CDR: 4-byte encapsulation header, then int32 sec, uint32 nanosec
-                sec = int.from_bytes(data[4:8], 'little', signed=True)
-                self.clock_ns = sec * NANOSECONDS_PER_SECOND + int.from_bytes(data[8:12], 'little')
-            log_time = self.clock_ns if self.clock_ns is not None else now
-            self.writer.write_serialized(name, data, log_time, info.get('source_timestamp', now) or now)
-            self.received += 1
+    def take_round(self) -> int:
+        """Take every message waiting in any subscription; write, in the order they were published, those
+        published more than HOLD_NS ago. Returns how many messages were taken."""
+        taken = self.take()
+        now = time.time_ns()
+        if self.clock_ns is None:
+            self.write_held(now - HOLD_NS)
+        else:   # a /clock publisher's messages arrive in order: all /clock before this one are here
+            self.write_held(max(min(self._clock_published, now - HOLD_NS), now - CLOCK_WAIT_NS))
+        return taken
 
-        def on_message(data: bytes, info) -> None:
-            record(data, info)
-            self.take_waiting()
+    def take(self) -> int:
+        """Take every message waiting in any subscription into the held messages; returns how many."""
+        waiting, taken = self._waiting, 0
+        for name, is_clock, handle, msg_type, delivered in self._recorded:
+            messages = delivered[:]
+            delivered.clear()
+            while (message := handle.take_message(msg_type, True)) is not None:
+                messages.append(message)
+            if not messages:
+                continue
+            published = self._published.get(name, 0)
+            order = 0 if is_clock else 1      # of messages published at the same instant, /clock comes first
+            for data, info in messages:
+                self.check_sequence(name, info)
+                # never earlier than the topic's previous message: each topic keeps its own order
+                published = max(published, info['source_timestamp'] or info['received_timestamp'])
+                waiting.append((published, order, self._arrivals, name, is_clock, data))
+                self._arrivals += 1
+            self._published[name] = published
+            if is_clock:
+                self._clock_published = published
+            taken += len(messages)
+        if taken:
+            waiting.sort()
+        return taken
 
-        subscription = self.create_subscription(self.kit[topic.type], name, on_message, profile, raw=True)
-        self.recorded.append((topic, subscription, record))
-        # /clock first, then odom: every message taken in a round is logged at the newest sim time
-        self.recorded.sort(key=lambda entry: (entry[0] is not CLOCK, entry[0] is not ODOM))
+    def write_held(self, published_before: float) -> None:
+        """Write the held messages published before ``published_before`` [ns, wall], in the order of publication."""
+        waiting = self._waiting
+        ready = bisect.bisect_left(waiting, (published_before,))
+        if not ready:
+            return
+        write = self.writer.write_serialized
+        for published, _, _, name, is_clock, data in waiting[:ready]:
+            if is_clock:
+                self.clock_ns = _clock_ns(data)
+            write(name, data, published if self.clock_ns is None else self.clock_ns, published)
+        del waiting[:ready]
+        self.received += ready
 
-    def take_waiting(self) -> None:
-        """Record every message already waiting in any subscription, /clock and odom first.
-
-        A control step brings seven messages; taking all that wait per wake-up, and waking at most
-        every BATCH_PERIOD, keeps the recorder's cost per message low (on two cores it competes with
-        the simulator and the controller for the CPU). Log times stay non-decreasing in the bag.
-        """
-        for _, subscription, record in self.recorded:
-            while (taken := subscription.handle.take_message(subscription.msg_type, True)) is not None:
-                record(*taken)
+    def check_sequence(self, name: str, info: dict) -> None:
+        """Count the messages missing before this one of its publisher (a gap in its sequence numbers)."""
+        sequence, publisher = info.get('publication_sequence_number'), info.get('publisher_gid')
+        if sequence is None or publisher is None:   # an rmw that does not number its messages
+            return
+        key = (name, publisher['data'])
+        last = self._sequences.get(key)
+        if last is not None and sequence > last + 1:
+            self.lost += sequence - last - 1
+        self._sequences[key] = sequence
 
     def open_gate(self) -> None:
         """Subscribe to every odom once every recorded per-step topic of the controllers has a discovered publisher."""
@@ -130,36 +201,51 @@ class RecorderNode(Node):
             self.subscribe(name, ODOM)
         self.get_logger().info('controller publishers discovered; recording odom')
 
+    def finish(self) -> None:
+        """Write what is still held, finalize the bag (with the count of lost messages, if any), say what it holds."""
+        if self.context.ok():
+            self.take()
+        self.write_held(float('inf'))
+        if self.lost:
+            self.writer.custom_data['lost_messages'] = str(self.lost)
+        self.writer.close()
+        lost = f', {self.lost} LOST (gaps in the publishers\' sequence numbers)' if self.lost else ''
+        print(f'recorder: {self.received} messages written to {self.writer.path}{lost}', flush=True)
+
 
 def main(argv: list[str] | None = None) -> int:
-    """Take what arrives (in rounds, see :meth:`RecorderNode.take_waiting`) until SIGINT/SIGTERM, then
-    drain what is still arriving and finalize the bag."""
+    """Take what waits every ROUND_PERIOD (see :meth:`RecorderNode.take_round`) until SIGINT/SIGTERM, then
+    until nothing has arrived for QUIET_TIME, and finalize the bag; exit 1 if messages were lost."""
     signals = init_ros(argv)
     node = None
     try:
         node = RecorderNode(rclpy_kit())
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        while not signals and executor.context.ok():
-            executor.spin_once(timeout_sec=0.0)
-            time.sleep(BATCH_PERIOD)
-        quiet_since = time.monotonic()
-        while time.monotonic() - quiet_since < 0.3:
-            before = node.received
-            executor.spin_once(timeout_sec=0.05)
-            if node.received != before:
-                quiet_since = time.monotonic()
+        freeze_long_lived_objects()     # no long garbage-collector pause while the flight runs
+        next_spin = time.monotonic()
+        stopping_since = None    # wall time of the signal, then of the latest message after it
+        while executor.context.ok():
+            time.sleep(ROUND_PERIOD)
+            now = time.monotonic()
+            if now >= next_spin:
+                executor.spin_once(timeout_sec=0.0)
+                next_spin = now + SPIN_PERIOD
+            taken = node.take_round()
+            if signals:
+                if stopping_since is None or taken:
+                    stopping_since = now
+                elif now - stopping_since >= QUIET_TIME:
+                    break
     except ParameterError as error:
         print(f'[FATAL] invalid parameter: {error}', file=sys.stderr, flush=True)
         return 2
     finally:
         if node is not None:
-            node.writer.close()
-            dropped = f', {node.writer.dropped} DROPPED (writer queue full)' if node.writer.dropped else ''
-            print(f'recorder: {node.received} messages written to {node.writer.path}{dropped}', flush=True)
+            node.finish()
             node.destroy_node()
         rclpy.try_shutdown()
-    return 1 if node is not None and node.writer.dropped else 0
+    return 1 if node is not None and node.lost else 0
 
 
 if __name__ == '__main__':

@@ -3,11 +3,10 @@
 ``BagWriter(path, topics)`` creates the bag directory, the MCAP file (profile ``ros2``, schemas
 ``ros2msg`` with the full message definition, channels ``cdr`` with offered QoS and RIHS01 type
 hash) and a first ``metadata.yaml``, so even a killed recording is a recognisable bag (see
-``recover``). Messages arrive as CDR bytes with their log (receive) and publish times [ns]:
-
-* the embedded backend writes them synchronously, stamped with sim time;
-* a ROS recorder can pass ``queue_size``: :meth:`write_serialized` then only enqueues (never
-  waits on the disk; a full queue drops the message and counts it) and a writer thread writes.
+``recover``). Messages arrive as CDR bytes with their log and publish times [ns] (the embedded
+backend stamps both with sim time; the ROS recorder passes the bytes it took from its raw
+subscriptions). A write only appends to the open chunk: full chunks are compressed and written by
+the MCAP file's background thread, so a writer never waits on the disk.
 
 :meth:`close` writes the summary and the final ``metadata.yaml`` (counts, times). Message
 definitions and type hashes come from the ``rosbags`` ROS 2 Jazzy typestore, whose RIHS01 hashes
@@ -16,8 +15,6 @@ equal those of the ROS 2 Jazzy interface packages (tested against their ``.json`
 from __future__ import annotations
 
 import errno
-import queue
-import threading
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -28,9 +25,6 @@ from quad_msgs_bridge.bag.metadata import (CUSTOM_DATA_RECORD, METADATA_FILE, RO
                            channel_metadata, information_yaml, offered_qos_profiles, write_metadata)
 from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, RECORDED_TOPICS, TopicSpec, resolve_all
 from quad_msgs_bridge.bag.mcap_file import DEFAULT_CHUNK_SIZE, BagWriteError, McapFileWriter
-
-_STOP = None
-
 
 def jazzy_typestore() -> Typestore:
     """The ``rosbags`` ROS 2 Jazzy typestore: message definitions, RIHS01 hashes, CDR."""
@@ -97,13 +91,12 @@ class BagWriter:
     def __init__(self, path: str | Path, topics: Sequence[TopicSpec] = RECORDED_TOPICS,
                  namespace: str | Sequence[str] = DEFAULT_NAMESPACE, *,
                  custom_data: Mapping[str, str] | None = None,
-                 overwrite: bool = False, chunk_size: int = DEFAULT_CHUNK_SIZE, queue_size: int = 0):
+                 overwrite: bool = False, chunk_size: int = DEFAULT_CHUNK_SIZE):
         """A bag of ``topics`` in ``namespace``, or in each of several (a fleet: one channel per vehicle
         and topic, ``/clock`` and ``/tf`` once)."""
         self.path = Path(path)
         self.custom_data = {str(k): str(v) for k, v in (custom_data or {}).items()}
         self.typestore = jazzy_typestore()
-        self.dropped = 0
         self.closed = False
         _prepare_directory(self.path, overwrite)
         self._file = McapFileWriter(self.path / f'{self.path.resolve().name}_0.mcap', profile='ros2',
@@ -126,73 +119,29 @@ class BagWriter:
         self._file.flush()
         write_bag_metadata(self.path, bag_information(self._file, self.topics, list(self._channels.values()),
                                                       self.custom_data))
-        self._error: BagWriteError | None = None
-        self._queue: queue.Queue | None = None
-        if queue_size > 0:
-            self._queue = queue.Queue(maxsize=queue_size)
-            self._thread = threading.Thread(target=self._drain, name=f'bag writer {self.path.name}', daemon=True)
-            self._thread.start()
 
     # --- writing ----------------------------------------------------------------------------
     def topic_names(self) -> list[str]:
         return list(self._channels)
 
     def write_serialized(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None = None) -> None:
-        """Record CDR bytes of ``topic`` (absolute name) received at ``log_time_ns``.
-
-        ``publish_time_ns`` defaults to the log time. With a queue this never blocks: if the
-        queue is full the message is dropped and counted in :attr:`dropped`.
-        """
+        """Record CDR bytes of ``topic`` (absolute name) at ``log_time_ns``; ``publish_time_ns`` defaults to it."""
         channel = self._channels.get(topic)
         if channel is None or self.closed:
             raise ValueError(f'bag {self.path} is closed' if self.closed else
                              f'topic {topic} is not recorded in bag {self.path} (topics: {", ".join(self._channels)})')
-        publish = log_time_ns if publish_time_ns is None else publish_time_ns
-        if self._queue is None:
-            self._file.add_message(channel, log_time_ns, publish, data)
-            return
-        if self._error is not None:
-            raise self._error
-        try:
-            self._queue.put_nowait((channel, log_time_ns, publish, data))
-        except queue.Full:
-            self.dropped += 1
+        self._file.add_message(channel, log_time_ns, log_time_ns if publish_time_ns is None else publish_time_ns,
+                               data)
 
     def write_message(self, topic: str, msg, log_time_ns: int, publish_time_ns: int | None = None) -> None:
         """Record a ``rosbags`` message object (serialized here with the typestore)."""
         self.write_serialized(topic, self.typestore.serialize_cdr(msg, self._types[topic]), log_time_ns,
                               publish_time_ns)
 
-    def _drain(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is _STOP:
-                return
-            try:
-                self._file.add_message(*item)
-            except BagWriteError as error:
-                self._error = error
-                return
-
     # --- closing ------------------------------------------------------------------------------
-    def _custom_data(self) -> dict[str, str]:
-        if not self.dropped:
-            return self.custom_data
-        return {**self.custom_data, 'dropped_messages': str(self.dropped)}
-
-    def _stop_thread(self) -> None:
-        if self._queue is None:
-            return
-        while self._thread.is_alive():
-            try:
-                self._queue.put(_STOP, timeout=0.1)
-                break
-            except queue.Full:
-                continue
-        self._thread.join()
-
     def close(self) -> None:
-        """Finish the MCAP file and write the final ``metadata.yaml``. Idempotent.
+        """Finish the MCAP file and write the final ``metadata.yaml`` (with :attr:`custom_data` as it is
+        now: a recorder may add to it until here). Idempotent.
 
         Raises BagWriteError if the bag could not be written, also if that was reported before
         (the MCAP file is then readable up to its last complete chunk; ``recover`` finalizes it).
@@ -200,12 +149,10 @@ class BagWriter:
         if self.closed:
             return
         self.closed = True
-        self._stop_thread()
-        error = self._error or self._file.error
-        if error is not None:
-            raise error
+        if self._file.error is not None:
+            raise self._file.error
         finish_bag(self._file, self.path, self.topics, [self._channels[t.name] for t in self.topics],
-                   self._custom_data())
+                   self.custom_data)
 
     def __enter__(self) -> 'BagWriter':
         return self
