@@ -268,6 +268,37 @@ def test_invalid_gains_are_named(kind, dotted, value, fragment):
         build_controller(kind, PARAMS, edited(dotted, value))
 
 
+@pytest.mark.parametrize('kind', ['nnit2fsmc', 'pid'])
+def test_unknown_gain_is_refused_with_the_closest_name(kind):
+    gains = edited('common.max_tlit', 0.3)
+    with pytest.raises(ParameterError, match=r'common\.max_tlit: unknown gain \(did you mean common\.max_tilt\?\)'):
+        build_controller(kind, PARAMS, gains)
+    gains = edited('nnit2fsmc.axes.phi.learnig_rate', 5.0)
+    with pytest.raises(ParameterError, match=r'nnit2fsmc\.axes\.phi\.learnig_rate: unknown gain '
+                                             r'\(did you mean nnit2fsmc\.axes\.phi\.learning_rate\?\)'):
+        build_controller(kind, PARAMS, gains)
+
+
+def test_missing_gain_names_the_close_unknown_key():
+    from nnit2fsmc_controller.factory import control_period as period   # reads common.control_rate
+    gains = copy.deepcopy(GAINS)
+    gains['common']['control_rat'] = gains['common'].pop('control_rate')
+    with pytest.raises(ParameterError, match=r'common\.control_rate: missing \(did you mean common\.control_rat\?\)'):
+        period(gains)
+    del gains['common']['control_rat']
+    with pytest.raises(ParameterError, match=r'common\.control_rate: missing$'):
+        period(gains)
+
+
+def test_gains_file_with_an_unknown_key_is_refused_naming_the_file(tmp_path):
+    from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE
+    path = tmp_path / 'gains.yaml'
+    path.write_text(DEFAULT_CONTROLLER_FILE.read_text().replace('max_tilt: 0.8 ', 'max_tlit: 0.3 ', 1))
+    with pytest.raises(ParameterError, match=f'controller file {path}: common.max_tlit: unknown gain '
+                                             r'\(did you mean common\.max_tilt\?\)'):
+        load_gains(path)
+
+
 def test_unknown_controller_kind_is_named():
     with pytest.raises(ParameterError, match="controller: 'lqr'"):
         build_controller('lqr', PARAMS, GAINS)
