@@ -178,7 +178,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
     if kind == 'se3':
         se3_gains = {axis: tuple(_non_negative(gains, f'se3.axes.{axis}.{name}')
                                  for name in ('k_error', 'k_rate', 'k_integral', 'integral_limit')) for axis in AXES}
-        return SE3Controller(kind, params, se3_gains, lam, dt, **structure)
+        return SE3Controller(kind, params, se3_gains, lam, dt, **structure, batch=batch)
     if kind == 'nnit2fsmc' or kind in ABLATIONS:
         laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch) for axis in AXES}
     elif kind in ('smc-sign', 'smc-sat'):
@@ -206,7 +206,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
     else:
         raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
     return CascadedController(
-        kind, params, laws, dt, **structure,
+        kind, params, laws, dt, **structure, batch=batch,
         attitude_rates=_get(gains, 'common.attitude_rates'),
         measurement_filter_hz=(_non_negative(gains, 'nnit2fsmc.measurement_filter_hz')
                                if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0),
