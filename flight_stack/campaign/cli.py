@@ -69,8 +69,11 @@ def main(argv: list[str]) -> int:
         print(f'error: {error}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f'interrupted: every finished batch is in {out_dir / "flights.csv"}; '
-              'rerun with --resume to fly the rest', file=sys.stderr)
+        if (out_dir / 'flights.csv').exists():
+            print(f'interrupted: every finished batch is in {out_dir / "flights.csv"}; '
+                  'rerun with --resume to fly the rest', file=sys.stderr)
+        else:
+            print(f'interrupted before the first batch; {out_dir} is unchanged', file=sys.stderr)
         return 130
     rate = outcome.vehicle_steps / outcome.wall_time_s if outcome.wall_time_s > 0 else float('nan')
     print(f'flew {outcome.flights_flown} flights in {outcome.wall_time_s:.1f} s '
