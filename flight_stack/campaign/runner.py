@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import ast
 import contextlib
-import fcntl
 import json
 import math
 import multiprocessing
@@ -35,6 +34,7 @@ import yaml
 
 from quad_msgs_bridge.vehicle_params import ParameterError
 
+from ..locking import FileLock
 from .batch import COLUMNS, BatchJob, CampaignSetup, compile_kernels, fly_batch
 from .results import FLIGHTS_FILE, SUMMARY_FILE, FlightsFile, read_flights, summarize
 from .spec import CampaignSpec
@@ -184,21 +184,10 @@ def writing(out_dir: Path):
         out_dir.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError):
         raise ParameterError(f'--out: {out_dir} cannot be created: a file is in its place') from None
-    path = out_dir / LOCK_FILE
-    with open(path, 'a+') as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            lock.seek(0)
-            raise ParameterError(f'--out: another campaign is writing {out_dir} (process {lock.read().strip()}); '
-                                 'let it finish, or stop it and continue with --resume (resume=True from Python)') from None
-        lock.truncate(0)
-        lock.write(f'{os.getpid()}\n')
-        lock.flush()
-        try:
-            yield
-        finally:
-            path.unlink(missing_ok=True)   # still held: no other run took it in between
+    with FileLock(out_dir / LOCK_FILE,
+                  lambda holder: f'--out: another campaign is writing {out_dir} (process {holder}); let it '
+                                 'finish, or stop it and continue with --resume (resume=True from Python)'):
+        yield
 
 
 def _ignore_sigint() -> None:
