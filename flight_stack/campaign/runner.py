@@ -246,13 +246,17 @@ class _DaskPool:
             raise ParameterError(f'--scheduler: cannot reach a Dask scheduler at {address} ({error})') from error
 
         self.workers = max(1, sum(self.client.nthreads().values()))
+        from distributed import as_completed as dask_as_completed
+        self.finished = dask_as_completed(loop=self.client.loop)
 
     def submit(self, job):
-        return self.client.submit(fly_batch, job, pure=False)
+        future = self.client.submit(fly_batch, job, pure=False)
+        self.finished.add(future)
+        return future
 
     def wait(self, futures) -> set:
-        from distributed import wait as dask_wait
-        return set(dask_wait(list(futures), return_when='FIRST_COMPLETED').done)
+        """The next finished future (every future submitted is one of ``futures`` until it is returned)."""
+        return {next(self.finished)}
 
     def close(self, cancel: bool) -> None:
         self.client.close()
