@@ -43,3 +43,27 @@ def test_help_names_the_subcommands_and_the_caps():
         assert f'run_stack.py {subcommand}' in text, subcommand
     from flight_stack.fleet import MAX_VEHICLES
     assert f'at most {MAX_VEHICLES}' in text
+
+
+def test_setup_venv_runs_pip_only_when_the_requirements_change(tmp_path):
+    """The second call finds the stamp of the same requirements and leaves pip alone (here: any pip run
+    after the first call fails, on a constraints file that does not exist, and the second call still
+    succeeds); a changed requirements file runs pip again (and so fails here)."""
+    requirements = tmp_path / 'requirements.txt'
+    requirements.write_text('# nothing to install\n')
+    venv = tmp_path / 'venv'
+
+    def setup(**env):
+        return subprocess.run(['bash', str(ROOT / 'scripts' / 'setup_venv.sh'), str(venv), str(requirements)],
+                              capture_output=True, text=True, timeout=300,
+                              env={**os.environ, 'PYTHON': sys.executable, **env})
+
+    first = setup()
+    assert first.returncode == 0, first.stderr
+    assert (venv / '.installed-requirements.txt.sha256').exists()
+    pip_fails = {'PIP_CONSTRAINT': str(tmp_path / 'absent-constraints.txt')}
+    again = setup(**pip_fails)
+    assert again.returncode == 0, again.stderr                      # pip was not run
+    requirements.write_text('# nothing to install, changed\n')
+    changed = setup(**pip_fails)
+    assert changed.returncode != 0 and 'absent-constraints.txt' in changed.stderr, changed.stderr   # pip ran
