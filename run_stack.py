@@ -34,7 +34,12 @@ def use_the_venv_or_exit() -> None:
     sys.exit(2)
 
 
-if __name__ == '__main__':
+def main(argv=None) -> int:
+    """The command (flight_stack.cli.main) with ``argv`` (default: the command line); its exit status."""
     use_the_venv_or_exit()
-    from flight_stack.cli import main   # importing flight_stack puts a clone's three ROS package folders on the path
+    from flight_stack.cli import main as run   # importing flight_stack puts a clone's ROS package folders on the path
+    return run(argv)
+
+
+if __name__ == '__main__':
     sys.exit(main())
