@@ -12,7 +12,6 @@ from pathlib import Path
 
 #: modules every command needs -> the distribution that provides them
 NEEDED = {'numpy': 'numpy', 'numba': 'numba', 'yaml': 'PyYAML', 'rosbags': 'rosbags', 'mcap': 'mcap'}
-REEXEC_MARK = 'NNIT2FSMC_REEXEC'   #: set when this script runs itself again with the venv (no second try)
 
 
 def missing_packages() -> list:
@@ -20,14 +19,17 @@ def missing_packages() -> list:
 
 
 def use_the_venv_or_exit() -> None:
-    """Run again with the clone's .venv python if this Python lacks a package, else exit 2 saying how to run."""
+    """Run again with the clone's .venv python if this Python (not that venv's) lacks a package; without a
+    .venv, exit 2 saying how to run. In the venv itself a missing package is named by the command."""
+    venv = Path(__file__).resolve().parent / '.venv'
+    if Path(sys.prefix).resolve() == venv.resolve():
+        return
     missing = missing_packages()
     if not missing:
         return
-    venv_python = Path(__file__).resolve().parent / '.venv' / 'bin' / 'python'
-    if venv_python.exists() and not os.environ.get(REEXEC_MARK):
-        os.environ[REEXEC_MARK] = '1'
-        os.execv(str(venv_python), [str(venv_python), str(Path(__file__).resolve()), *sys.argv[1:]])
+    python = venv / 'bin' / 'python'
+    if python.exists():
+        os.execv(str(python), [str(python), str(Path(__file__).resolve()), *sys.argv[1:]])
     print(f'error: {sys.executable} lacks {", ".join(missing)}; run `bash scripts/fly.sh [OPTIONS]` (it makes '
           f'.venv once), or `.venv/bin/python run_stack.py [OPTIONS]`, or `pip install .` and `nnit2fsmc-stack`',
           file=sys.stderr)
