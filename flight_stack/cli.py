@@ -16,6 +16,14 @@ Examples:
   python3 run_stack.py --controller smc-sign --out out/sign   # same disturbances, to compare
   python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
+Subcommands (each has its own --help): campaign, and the bag tools review, recover, rosbag2-qos (below).
+  python3 run_stack.py campaign SPEC.yaml --out DIR      # a robustness campaign (docs/CAMPAIGNS.md);
+                                                         #   the shipped specs: run_stack.py campaign --list
+
+From a clone, python3 runs the stack with the clone's .venv (bash scripts/fly.sh makes it).
+Limits: --vehicles at most 20; --seed 0 to 2^31 - 1; --physics-rate a whole multiple of the
+control rate; --speed-factor at most 1000; --extra-subscribers at most 100; --duration > 0.
+
 Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
   python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
   python3 run_stack.py recover BAG                       # finalize the bag of a killed recording
@@ -34,7 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 #: third-party modules the stack imports -> the distribution that provides them
-DEPENDENCIES = {'numpy': 'numpy', 'yaml': 'PyYAML', 'rosbags': 'rosbags', 'mcap': 'mcap', 'zstandard': 'zstandard',
+DEPENDENCIES = {'numpy': 'numpy', 'numba': 'numba', 'yaml': 'PyYAML', 'rosbags': 'rosbags', 'mcap': 'mcap', 'zstandard': 'zstandard',
                 'matplotlib': 'matplotlib'}
 
 
@@ -42,6 +50,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     from nnit2fsmc_controller.factory import CONTROLLERS
     from nnit2fsmc_controller.trajectory import SCENARIOS
     from quad_msgs_bridge.contract import RECORDED_TOPICS
+    from flight_stack.fleet import MAX_VEHICLES
 
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -70,9 +79,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help='ROS backend: namespace of the vehicle (default quad), or of a fleet\'s vehicles '
                              '(default: the root namespace)')
     parser.add_argument('--vehicles', type=int, default=1, metavar='N',
-                        help='fly N vehicles on one sim clock, uav1..uavN, each its own copy of the scenario '
+                        help='fly N vehicles (at most %d) on one sim clock, uav1..uavN, each its own copy of the scenario '
                              'shifted 3 m along y from the previous one (ROS: one simulator, a controller and a '
-                             'trajectory node per vehicle; embedded: the fleet stepped as one batch)')
+                             'trajectory node per vehicle; embedded: the fleet stepped as one batch)' % MAX_VEHICLES)
     parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
                         help='ROS backend: lockstep (deterministic) or realtime simulation')
     parser.add_argument('--speed-factor', type=float, default=None,

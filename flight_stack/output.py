@@ -11,6 +11,11 @@ system) and :meth:`RunOutput.commit` moves the finished run into place in one st
 * a flight that fails its checks (``flight_ok`` false) is a finished run: it is committed.
 
 A bag given outside ``OUT`` (``--bag``) is a second target, staged and committed the same way.
+
+Two runs into one ``OUT`` at once: :meth:`RunOutput.create` takes an exclusive lock on
+``.OUT_NAME.lock`` beside ``OUT`` (see :mod:`flight_stack.locking`) and holds it until the run is
+committed or kept as partial, so the second run is refused by name (ParameterError) before it
+flies, and never replaces the first one's result.
 """
 from __future__ import annotations
 
@@ -20,6 +25,8 @@ import shutil
 from pathlib import Path
 
 from quad_msgs_bridge.vehicle_params import ParameterError
+
+from .locking import FileLock
 
 #: what a run writes into its output folder (and what --overwrite replaces)
 RUN_ENTRIES = ('summary.json', 'review.json', 'report.html', 'report.md', 'plots', 'bag')
@@ -126,6 +133,8 @@ class RunOutput:
             self._bag_entry = self.bag_path.name
         entries = RUN_ENTRIES + ((self._bag_entry,) if self._bag_entry not in (None, *RUN_ENTRIES) else ())
         self._out = _Target(self.out_dir, entries)
+        self._overwrite = overwrite
+        self._lock: FileLock | None = None
         self._check_out(overwrite)
         if self.bag_path is not None and self._bag_entry is None:
             self._check_separate_bag(overwrite)
@@ -156,9 +165,30 @@ class RunOutput:
                                      'it is not replaced, even with --overwrite')
         _check_writable_parent('--bag', bag)
 
-    def create(self) -> None:
-        """Make the staging folders (raises ParameterError if that is impossible)."""
+    def _lock_out(self) -> None:
+        """Hold ``out_dir`` for this run (ParameterError naming the other run's process if it is held),
+        then check it again: a run that finished meanwhile is an earlier run now."""
+        final = self._out.final
+        lock = FileLock(final.parent / f'.{final.name}.lock',
+                        lambda holder: f'--out: another run is writing {self.out_dir} (process {holder}); let it '
+                                       'finish, or choose another --out')
         try:
+            final.parent.mkdir(parents=True, exist_ok=True)
+            self._lock = lock.acquire()
+        except OSError as error:
+            raise ParameterError(f'--out: cannot write into {final.parent}: {error.strerror}') from error
+        self._check_out(self._overwrite)
+
+    def _unlock(self) -> None:
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
+
+    def create(self) -> None:
+        """Lock ``out_dir`` and make the staging folders (raises ParameterError if another run is writing
+        it, or it cannot be written)."""
+        try:
+            self._lock_out()
             self._out.create_staging('--out')
             if self._bag is not None:
                 self._bag.create_staging('--bag')
@@ -183,6 +213,7 @@ class RunOutput:
         if self._bag is not None:
             self._bag.commit()
         self._out.commit()
+        self._unlock()
 
     def keep_partial(self) -> list[Path]:
         """The run did not finish: keep what it wrote where it is (staging folders with content), remove
@@ -195,9 +226,11 @@ class RunOutput:
                 kept.append(target.staging)
             else:
                 target.discard()
+        self._unlock()
         return kept
 
     def discard(self) -> None:
         for target in (self._out, self._bag):
             if target is not None:
                 target.discard()
+        self._unlock()

@@ -32,4 +32,11 @@ if [ ! -x "$venv/bin/python" ]; then
   fi
   touch "$venv/COLCON_IGNORE"   # colcon must not crawl the venv
 fi
-"$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$requirements"
+# pip runs once per content of the requirements files (this one and those it includes with -r, all
+# requirements*.txt beside it): a stamp in the venv holds their hash, so a later call only compares it.
+stamp="$venv/.installed-$(basename "$requirements").sha256"
+hash=$(cat "$(dirname "$requirements")"/requirements*.txt "$requirements" | sha256sum | cut -d' ' -f1)
+if [ "$(cat "$stamp" 2>/dev/null)" != "$hash" ]; then
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$requirements"
+  echo "$hash" > "$stamp"
+fi

@@ -221,3 +221,137 @@ def test_a_campaign_without_perturbations_reports_cleanly(tmp_path):
     summary = json.loads((tmp_path / 'campaign.json').read_text())
     assert summary['controllers']['pid']['rmse_position_m']['p50'] == pytest.approx(rows[0]['rmse_position_m'])
     assert (tmp_path / 'plots' / 'boxplots.png').exists()
+
+
+def test_planning_is_lazy_a_billion_flights_plan_their_first_batch_alone():
+    from flight_stack.campaign.runner import flights_to_fly, plan_jobs
+    spec = parse_spec(DOCUMENT | {'flights': 1_000_000_000})
+    jobs = plan_jobs(spec, set(), RunOptions(batch_size=4), workers=2)
+    assert iter(jobs) is jobs and not isinstance(jobs, (list, tuple))   # a generator, not a list
+    first, second = next(jobs), next(jobs)
+    assert (first.controller, first.flights) == ('nnit2fsmc', (0, 1, 2, 3))
+    assert second.flights == (4, 5, 6, 7)
+    assert flights_to_fly(spec, set()) == 2_000_000_000
+    default = next(plan_jobs(spec, set(), RunOptions(), workers=2))
+    assert len(default.flights) == 500       # the default batch size's cap
+
+
+def test_planning_skips_the_flown_pairs_in_batches_of_the_batch_size():
+    from flight_stack.campaign.runner import flights_to_fly, plan_jobs
+    spec = parse_spec(DOCUMENT | {'flights': 7})
+    done = {(1, 'pid'), (4, 'pid'), (6, 'nnit2fsmc'), (9, 'pid'), (2, 'smc-sign')}   # the last two: not of this spec
+    jobs = [(job.controller, job.flights) for job in plan_jobs(spec, done, RunOptions(batch_size=2), workers=1)]
+    assert jobs == [('nnit2fsmc', (0, 1)), ('nnit2fsmc', (2, 3)), ('nnit2fsmc', (4, 5)),
+                    ('pid', (0, 2)), ('pid', (3, 5)), ('pid', (6,))]
+    assert flights_to_fly(spec, done) == 14 - 3
+
+
+def test_campaign_out_that_is_a_file_is_a_one_line_error(tmp_path):
+    spec_file = tmp_path / 'spec.yaml'
+    spec_file.write_text(yaml.safe_dump(DOCUMENT))
+    a_file = tmp_path / 'results.txt'
+    a_file.write_text('keep me\n')
+    for out in (a_file, a_file / 'sub'):
+        process = run_cli(spec_file, '--out', out, '--quiet')
+        _, stderr = process.communicate(timeout=120)
+        assert process.returncode == 2, stderr
+        assert stderr.splitlines()[-1].startswith(f'error: --out: {a_file}') and 'Traceback' not in stderr, stderr
+    assert a_file.read_text() == 'keep me\n'
+
+
+SCRIPT = '''import sys
+sys.path[:0] = {paths!r}
+from flight_stack.api import run_campaign
+print('the script runs', flush=True)
+{call}
+'''
+TINY = {'scenario': 'hover', 'duration': 0.5, 'settle_time': 0.3, 'controllers': ['pid'], 'flights': 1,
+        'control_rate_hz': 250}
+
+
+def write_script(tmp_path: Path, guarded: bool) -> Path:
+    import flight_stack
+    spec_file = tmp_path / 'tiny.yaml'
+    spec_file.write_text(yaml.safe_dump(TINY))
+    call = f"summary = run_campaign({str(spec_file)!r}, {str(tmp_path / 'out')!r}, workers=1)\nprint('flown')"
+    if guarded:
+        call = "if __name__ == '__main__':\n" + ''.join(f'    {line}\n' for line in call.splitlines())
+    paths = [str(ROOT)] + [str(ROOT / 'ros2_ws' / 'src' / name) for name in
+                           ('quad_msgs_bridge', 'quad_sim', 'nnit2fsmc_controller')]
+    script = tmp_path / 'my_campaign.py'
+    script.write_text(SCRIPT.format(paths=paths, call=call))
+    assert Path(flight_stack.__file__).parent.parent == ROOT
+    return script
+
+
+def test_a_script_calling_run_campaign_without_the_main_guard_is_refused_before_anything_is_made(tmp_path):
+    script = write_script(tmp_path, guarded=False)
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert result.returncode == 1
+    assert result.stdout.count('the script runs') == 1          # no worker ran it again
+    last = result.stderr.strip().splitlines()
+    assert f"ParameterError: run_campaign: {script} calls it outside `if __name__ == '__main__':` (line 5)" \
+        in result.stderr, result.stderr
+    assert last[-1].strip() == 'run_campaign(...)' and last[-2].strip() == "if __name__ == '__main__':"
+    assert 'BrokenProcessPool' not in result.stderr and '--resume' not in result.stderr
+    assert not (tmp_path / 'out').exists()
+
+
+def test_the_same_script_with_the_main_guard_flies(tmp_path):
+    script = write_script(tmp_path, guarded=True)
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.count('flown') == 1   # (its unguarded lines run again in the worker: spawn imports it)
+    assert len(read_flights(tmp_path / 'out' / 'flights.csv')) == 1
+
+
+def stderr_lines(process):
+    """The lines the process writes to stderr, as they come (progress bars split at carriage returns)."""
+    buffer = ''
+    while True:
+        chunk = process.stderr.read(1)
+        if not chunk:
+            if buffer:
+                yield buffer
+            return
+        if chunk in '\r\n':
+            yield buffer
+            buffer = ''
+        else:
+            buffer += chunk
+
+
+PHASES = {'planning': 'campaign: ', 'compiling': 'compiling kernels', 'flying': 'campaign:   0%'}
+
+
+@pytest.mark.parametrize('phase, signal_number', [('planning', signal.SIGINT), ('compiling', signal.SIGINT),
+                                                  ('flying', signal.SIGINT), ('compiling', signal.SIGTERM),
+                                                  ('flying', signal.SIGTERM)])
+def test_a_signal_stops_a_campaign_in_every_phase_and_resume_still_works(tmp_path, phase, signal_number):
+    """A campaign of 10^9 flights stopped after its first rows, continued with --resume and stopped again in
+    a phase (told by what it has printed): it stops within seconds, exit 130, flights.csv keeps its rows."""
+    spec_file = tmp_path / 'spec.yaml'
+    spec_file.write_text(yaml.safe_dump(TINY | {'flights': 1_000_000_000, 'duration': 2.0, 'settle_time': 1.0}))
+    out = tmp_path / 'out'
+    earlier = run_cli(spec_file, '--out', out, '--workers', 1, '--batch-size', 1)
+    for _ in stderr_lines(earlier):
+        if len(read_flights(out / 'flights.csv')) >= 1:
+            break
+    earlier.send_signal(signal.SIGINT)
+    _, stderr = earlier.communicate(timeout=60)
+    assert earlier.returncode == 130 and 'rerun with --resume' in stderr, stderr
+    before = (out / 'flights.csv').read_text()
+    assert len(read_flights(out / 'flights.csv')) >= 1
+    process = run_cli(spec_file, '--out', out, '--resume', '--workers', 1, '--batch-size', 1)
+    for line in stderr_lines(process):
+        if PHASES[phase] in line:
+            break
+    sent = time.monotonic()
+    process.send_signal(signal_number)
+    _, stderr = process.communicate(timeout=60)
+    stopped_after = time.monotonic() - sent
+    print(f'{phase}, signal {signal_number}: stopped {stopped_after:.2f} s after the signal')
+    assert process.returncode == 130, stderr
+    assert stopped_after < 10.0
+    assert (out / 'flights.csv').read_text().startswith(before)   # nothing lost, at most rows added
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith('.')) == []   # the lock is released

@@ -130,3 +130,21 @@ def test_the_spec_file_keys_are_documented():
     for key in [*example, *example['vehicle'], 'cog_offset_m', 'rotor_efficiency_loss', 'bias_std', 'direction_deg',
                 'max_error_m', 'physics_rate_hz', 'disturbances']:
         assert key in documented, key
+
+
+def test_shipped_specs_are_found_by_name_from_anywhere(tmp_path, monkeypatch):
+    from flight_stack.campaign.spec import SHIPPED_SPECS, shipped_specs
+    assert EXAMPLE.resolve().parent == SHIPPED_SPECS           # campaigns/ of a clone is the packaged folder
+    assert 'paper-robustness' in [path.stem for path in shipped_specs()]
+    monkeypatch.chdir(tmp_path)                                  # no campaigns/ here
+    expected = load_spec(EXAMPLE)
+    for name in ('campaigns/paper-robustness.yaml', 'paper-robustness.yaml', 'paper-robustness'):
+        assert load_spec(name) == expected, name
+    with pytest.raises(ParameterError, match=r'campaign spec paper-robustnes: .*\(shipped specs: .*paper-robustness'):
+        load_spec('paper-robustnes')
+
+
+def test_the_packaged_specs_are_package_data():
+    import tomllib
+    document = tomllib.loads((ROOT / 'pyproject.toml').read_text())
+    assert 'campaign/specs/*.yaml' in document['tool']['setuptools']['package-data']['flight_stack']

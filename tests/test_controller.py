@@ -115,6 +115,47 @@ def test_non_finite_input_is_refused_before_any_learning(where, bad):
     assert controller.update(0.0, state, reference) == fresh.update(0.0, state, reference)
 
 
+HOVER_STATE = [0.0, 0.0, 1.0] + [0.0] * 9
+BAD_UPDATE_INPUTS = {   # (batch of the controller, t, state, reference) -> what the ValueError must say
+    '(B, 12) state, single vehicle': (None, 0.0, np.zeros((4, 12)), hold((0.0, 0.0, 1.0)),
+                                      r'state: expected 12 numbers .*got an array of shape \(4, 12\)'),
+    '(12, B) state, single vehicle': (None, 0.0, np.zeros((12, 4)), hold((0.0, 0.0, 1.0)),
+                                      r'state: a single-vehicle controller takes 12 numbers .*batch=B'),
+    '11-value state': (None, 0.0, HOVER_STATE[:11], hold((0.0, 0.0, 1.0)),
+                       r'state: expected 12 numbers \(x, y, z \[m, world ENU\].*got 11 values'),
+    'state not a sequence': (None, 0.0, 1.0, hold((0.0, 0.0, 1.0)), r'state: expected a sequence of 12 values'),
+    'batch of the wrong length': (3, 0.0, [np.full(4, v) for v in HOVER_STATE], hold((0.0, 0.0, 1.0)),
+                                  r'state: a controller of a batch of 3 vehicles takes 12 arrays of 3 values '
+                                  r'\(shape \(12, 3\)\), got an array of shape \(4,\)'),
+    'floats for a batch': (3, 0.0, HOVER_STATE, hold((0.0, 0.0, 1.0)), r'state: .*batch of 3 .*got a number'),
+    'non-finite time': (None, math.nan, HOVER_STATE, hold((0.0, 0.0, 1.0)), r't: the time must be finite'),
+    'time not a number': (None, '0.1', HOVER_STATE, hold((0.0, 0.0, 1.0)), r't: expected a number of seconds, got str'),
+    'reference a tuple': (None, 0.0, HOVER_STATE, ((0.0, 0.0, 1.0), (0, 0, 0), (0, 0, 0), 0.0),
+                          r'reference: expected a quad_msgs_bridge\.reference\.ReferenceSample, got tuple'),
+}
+
+
+@pytest.mark.parametrize('kind', ['nnit2fsmc', 'pid', 'se3'])
+@pytest.mark.parametrize('case', BAD_UPDATE_INPUTS)
+def test_bad_update_arguments_are_refused_naming_the_argument(kind, case):
+    batch, t, state, reference, message = BAD_UPDATE_INPUTS[case]
+    controller = build_controller(kind, PARAMS, GAINS, batch=batch)
+    fresh = build_controller(kind, PARAMS, GAINS, batch=batch)
+    with pytest.raises(ValueError, match=message):
+        controller.update(t, state, reference)
+    good = HOVER_STATE if batch is None else [np.full(batch, v) for v in HOVER_STATE]
+    first, untouched = controller.update(0.0, good, hold((0.0, 0.0, 1.0))), fresh.update(0.0, good, hold((0.0, 0.0, 1.0)))
+    np.testing.assert_array_equal(np.asarray(first.forces), np.asarray(untouched.forces))   # nothing moved
+
+
+def test_a_batch_of_12_vehicles_as_a_12_by_12_array_flies():
+    """(12, B) is the batch layout; with B = 12 the shape alone is ambiguous, and a batch controller takes it."""
+    controller = build_controller('pid', PARAMS, GAINS, batch=12)
+    state = np.tile(np.array(HOVER_STATE)[:, None], (1, 12))
+    out = controller.update(0.0, state, hold((0.0, 0.0, 1.0)))
+    assert np.shape(out.forces) == (4, 12) and np.isfinite(out.forces).all()
+
+
 def wild_input(rng):
     """A state far from any equilibrium and an unrelated reference, as plain floats."""
     state = [*rng.normal(0, 3, 6), *rng.uniform(-1.0, 1.0, 2), rng.uniform(-math.pi, math.pi), *rng.normal(0, 5, 3)]
@@ -266,6 +307,37 @@ def edited(dotted, value):
 def test_invalid_gains_are_named(kind, dotted, value, fragment):
     with pytest.raises(ParameterError, match=fragment.replace('.', r'\.')):
         build_controller(kind, PARAMS, edited(dotted, value))
+
+
+@pytest.mark.parametrize('kind', ['nnit2fsmc', 'pid'])
+def test_unknown_gain_is_refused_with_the_closest_name(kind):
+    gains = edited('common.max_tlit', 0.3)
+    with pytest.raises(ParameterError, match=r'common\.max_tlit: unknown gain \(did you mean common\.max_tilt\?\)'):
+        build_controller(kind, PARAMS, gains)
+    gains = edited('nnit2fsmc.axes.phi.learnig_rate', 5.0)
+    with pytest.raises(ParameterError, match=r'nnit2fsmc\.axes\.phi\.learnig_rate: unknown gain '
+                                             r'\(did you mean nnit2fsmc\.axes\.phi\.learning_rate\?\)'):
+        build_controller(kind, PARAMS, gains)
+
+
+def test_missing_gain_names_the_close_unknown_key():
+    from nnit2fsmc_controller.factory import control_period as period   # reads common.control_rate
+    gains = copy.deepcopy(GAINS)
+    gains['common']['control_rat'] = gains['common'].pop('control_rate')
+    with pytest.raises(ParameterError, match=r'common\.control_rate: missing \(did you mean common\.control_rat\?\)'):
+        period(gains)
+    del gains['common']['control_rat']
+    with pytest.raises(ParameterError, match=r'common\.control_rate: missing$'):
+        period(gains)
+
+
+def test_gains_file_with_an_unknown_key_is_refused_naming_the_file(tmp_path):
+    from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE
+    path = tmp_path / 'gains.yaml'
+    path.write_text(DEFAULT_CONTROLLER_FILE.read_text().replace('max_tilt: 0.8 ', 'max_tlit: 0.3 ', 1))
+    with pytest.raises(ParameterError, match=f'controller file {path}: common.max_tlit: unknown gain '
+                                             r'\(did you mean common\.max_tilt\?\)'):
+        load_gains(path)
 
 
 def test_unknown_controller_kind_is_named():

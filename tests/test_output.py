@@ -144,3 +144,61 @@ def test_a_bag_of_another_name_in_the_output_folder_belongs_to_the_run(tmp_path)
     (output.bag / 'flight7_0.mcap').write_bytes(b'new')
     output.commit()
     assert snapshot(out) == {'flight7/flight7_0.mcap': b'new'}
+
+
+def test_a_second_run_into_the_same_out_is_refused_while_the_first_writes_it(tmp_path):
+    out = tmp_path / 'run'
+    first = RunOutput(out, out / 'bag', overwrite=True)
+    second = RunOutput(out, out / 'bag', overwrite=True)       # both checked before either started
+    first.create()
+    with pytest.raises(ParameterError, match=f'--out: another run is writing {out} \\(process {os.getpid()}\\)'):
+        second.create()
+    (first.out / 'summary.json').write_text('first')
+    first.commit()
+    assert (out / 'summary.json').read_text() == 'first'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['run']      # no staging folder, the lock file is gone
+    late = RunOutput(tmp_path / 'run2', None, overwrite=False)
+    late.create()
+    late.keep_partial()                                                # released on every way out
+    again = RunOutput(tmp_path / 'run2', None, overwrite=False)
+    again.create()
+    again.discard()
+
+
+def test_a_run_that_finished_while_the_second_waited_is_an_earlier_run_for_it(tmp_path):
+    out = tmp_path / 'run'
+    first, second = RunOutput(out, None, overwrite=False), RunOutput(out, None, overwrite=False)
+    first.create()
+    (first.out / 'summary.json').write_text('first')
+    first.commit()
+    with pytest.raises(ParameterError, match='holds an earlier run'):
+        second.create()                     # checked again once it holds the lock
+    assert (out / 'summary.json').read_text() == 'first'
+
+
+def test_two_concurrent_flights_into_one_out_neither_is_lost(tmp_path):
+    """Two real run_stack.py processes: the second starts while the first writes OUT (its staging folder
+    exists) and is refused by name; the first's result is complete in OUT."""
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+    root = Path(__file__).resolve().parent.parent
+    out = tmp_path / 'seed-sweep'
+    command = [sys.executable, str(root / 'run_stack.py'), '--backend', 'embedded', '--scenario', 'hover',
+               '--duration', '1', '--settle-time', '0.5', '--quiet', '--out', str(out), '--overwrite']
+    first = subprocess.Popen(command + ['--seed', '1'], cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             text=True)
+    deadline = time.monotonic() + 120
+    while not staging_folders(tmp_path) and first.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert staging_folders(tmp_path), 'the first flight never started writing'
+    second = subprocess.run(command + ['--seed', '2'], cwd=root, capture_output=True, text=True, timeout=300)
+    stdout, stderr = first.communicate(timeout=300)
+    assert first.returncode in (0, 1), stderr               # flown (1: its checks failed, still a complete run)
+    assert second.returncode == 2, second.stderr
+    assert f'error: --out: another run is writing {out} (process {first.pid})' in second.stderr, second.stderr
+    import json
+    assert json.loads((out / 'summary.json').read_text())['seed'] == 1
+    assert (out / 'bag' / 'metadata.yaml').exists()
+    assert staging_folders(tmp_path) == [] and sorted(p.name for p in tmp_path.iterdir()) == ['seed-sweep']

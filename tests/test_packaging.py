@@ -82,7 +82,7 @@ def test_the_wheel_holds_the_packages_and_their_configuration(installed):
     for path in ('flight_stack/cli.py', 'quad_msgs_bridge/bag/reader.py', 'quad_msgs_bridge/review/plots.py',
                  'quad_sim/model.py', 'nnit2fsmc_controller/factory.py', 'quad_msgs_bridge/config/vehicle.yaml',
                  'quad_sim/config/quad_sim.yaml', 'nnit2fsmc_controller/config/controller.yaml',
-                 'nnit2fsmc_controller/config/trajectory.yaml'):
+                 'nnit2fsmc_controller/config/trajectory.yaml', 'flight_stack/campaign/specs/paper-robustness.yaml'):
         assert path in names, path
     assert not [name for name in names if name.startswith(('tests/', 'bench/', 'test/'))]
 

@@ -86,8 +86,21 @@ class CampaignSetup:
         return int(round(spec.duration / self.control_dt))
 
 
+def compile_kernels(spec: CampaignSpec, vehicle_file: str | None = None, gains_file: str | None = None) -> None:
+    """Have numba compile (or load from its cache) every kernel a batch of each controller of ``spec``
+    runs: flight 0 flown for two control steps, then summarised. A worker process that starts later
+    loads them from numba's cache instead of compiling them again."""
+    for controller in spec.controllers:
+        _fly(BatchJob(spec, controller, (0,), vehicle_file, gains_file), steps=2)
+
+
 def fly_batch(job: BatchJob) -> list[dict]:
     """Fly the job's flights together; one row (a dict, see :func:`row`) per flight, in order."""
+    return _fly(job, steps=None)
+
+
+def _fly(job: BatchJob, steps: int | None) -> list[dict]:
+    """The rows of the job's flights flown together for ``steps`` control steps (None: the whole duration)."""
     spec = job.spec
     setup = CampaignSetup.of(spec, job.vehicle_file, job.gains_file)
     size = len(job.flights)
@@ -101,7 +114,7 @@ def fly_batch(job: BatchJob) -> list[dict]:
     loop = ClosedLoop(controller, simulator, setpoints.sample, setup.substeps, setup.rules(spec),
                       sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, statistics=True)
     with np.errstate(all='ignore'):      # a failing vehicle may overflow before it is frozen
-        for _ in range(setup.steps(spec)):
+        for _ in range(setup.steps(spec) if steps is None else steps):
             loop.step()
             if not loop.flying.any():
                 break

@@ -5,6 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from .runner import MAX_BATCH_SIZE
+
 from quad_msgs_bridge.vehicle_params import ParameterError
 
 DESCRIPTION = """Fly a robustness campaign: every controller of the spec flies the same perturbed flights
@@ -25,15 +27,19 @@ A Dask scheduler runs whatever code it is sent: start it on localhost or a trust
 def parse_args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog='run_stack.py campaign', description=DESCRIPTION, epilog=EPILOG,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('spec', type=Path, help='campaign spec (YAML)')
+    parser.add_argument('spec', type=Path, nargs='?',
+                        help='campaign spec (YAML): a file, or the name of a shipped spec (see --list)')
+    parser.add_argument('--list', action='store_true', help='list the shipped specs (where they are) and exit')
     parser.add_argument('--out', type=Path, default=None, help='output folder (default out/campaign-<spec name>)')
-    parser.add_argument('--flights', type=int, default=None, help='flights per controller (overrides the spec)')
+    parser.add_argument('--flights', type=int, default=None,
+                        help='flights per controller, >= 1, no upper limit (overrides the spec)')
     parser.add_argument('--seed', type=int, default=None, help='campaign seed (overrides the spec)')
     parser.add_argument('--duration', type=float, default=None, help='sim time per flight [s] (overrides the spec)')
     parser.add_argument('--controllers', default=None, help='comma-separated controllers (overrides the spec)')
     parser.add_argument('--workers', type=int, default=None, help='local worker processes (default: every core)')
     parser.add_argument('--batch-size', type=int, default=None,
-                        help='flights stepped together per batch (default: an even share per worker, at most 500)')
+                        help='flights stepped together per batch (default: an even share per worker, at most '
+                             f'{MAX_BATCH_SIZE})')
     parser.add_argument('--scheduler', default=None, metavar='ADDRESS',
                         help='run the batches on this Dask distributed scheduler (e.g. tcp://127.0.0.1:8786)')
     parser.add_argument('--replay', type=int, default=None, metavar='K',
@@ -43,13 +49,20 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle YAML (default: the packaged one)')
     parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.spec is None and not args.list:
+        parser.error('the spec is required (a YAML file, or a shipped spec: --list)')
+    return args
 
 
 def main(argv: list[str]) -> int:
     args = parse_args(argv)
     from .runner import RunOptions, run_campaign
-    from .spec import load_spec
+    from .spec import load_spec, shipped_specs
+    if args.list:
+        for path in shipped_specs():
+            print(f'{path.stem:28s} {path}')
+        return 0
     try:
         spec = load_spec(args.spec).overridden(flights=args.flights, seed=args.seed, duration=args.duration,
                                                controllers=args.controllers)
@@ -69,8 +82,11 @@ def main(argv: list[str]) -> int:
         print(f'error: {error}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f'interrupted: every finished batch is in {out_dir / "flights.csv"}; '
-              'rerun with --resume to fly the rest', file=sys.stderr)
+        if (out_dir / 'flights.csv').exists():
+            print(f'interrupted: every finished batch is in {out_dir / "flights.csv"}; '
+                  'rerun with --resume to fly the rest', file=sys.stderr)
+        else:
+            print(f'interrupted before the first batch; {out_dir} is unchanged', file=sys.stderr)
         return 130
     rate = outcome.vehicle_steps / outcome.wall_time_s if outcome.wall_time_s > 0 else float('nan')
     print(f'flew {outcome.flights_flown} flights in {outcome.wall_time_s:.1f} s '

@@ -6,32 +6,44 @@ core); with a scheduler address the jobs go to an existing Dask distributed clus
 scheduler`` / ``dask worker``; a scheduler runs whatever code it is sent: use it on a trusted
 network only). Every finished batch is appended to ``flights.csv`` at once, so Ctrl-C or a crash
 loses no finished batch, and ``resume`` flies only the missing (flight, controller) pairs.
+
+The batches are planned lazily (a generator), and only a few are handed to the workers ahead of
+the ones flying, so the memory of a campaign does not grow with its number of flights. The
+kernels are compiled (or loaded from numba's cache) in this process before the first batch, so
+the workers find them in the cache. SIGINT (Ctrl-C) and SIGTERM stop a campaign at any phase
+within about a second: the workers are terminated, and the finished batches stay in flights.csv.
 """
 from __future__ import annotations
 
+import ast
 import contextlib
-import fcntl
 import json
 import math
 import multiprocessing
 import os
 import signal
 import sys
+import threading
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import yaml
 
 from quad_msgs_bridge.vehicle_params import ParameterError
 
-from .batch import COLUMNS, BatchJob, CampaignSetup, fly_batch
+from ..locking import FileLock
+from .batch import COLUMNS, BatchJob, CampaignSetup, compile_kernels, fly_batch
 from .results import FLIGHTS_FILE, SUMMARY_FILE, FlightsFile, read_flights, summarize
 from .spec import CampaignSpec
 
 SPEC_FILE = 'spec.yaml'
 LOCK_FILE = '.campaign.lock'
+MAX_BATCH_SIZE = 500            #: the default batch size's cap (flights stepped together)
+#: batches handed to the workers ahead of the ones flying, per worker (a bound on what waits in memory)
+QUEUED_PER_WORKER = 2
 
 
 @dataclass(frozen=True)
@@ -59,16 +71,53 @@ def _positive_int(name: str, value) -> int | None:
     return value
 
 
-def plan_jobs(spec: CampaignSpec, done: set, options: RunOptions, workers: int) -> list[BatchJob]:
-    """The batches still to fly: for each controller, its missing flights in chunks of the batch size."""
-    size = options.batch_size or max(1, min(500, math.ceil(spec.flights / workers)))
-    jobs = []
+def batch_size(spec: CampaignSpec, options: RunOptions, workers: int) -> int:
+    """Flights per batch: ``options.batch_size``, else an even share per worker, at most MAX_BATCH_SIZE."""
+    return options.batch_size or max(1, min(MAX_BATCH_SIZE, math.ceil(spec.flights / workers)))
+
+
+def plan_jobs(spec: CampaignSpec, done: set, options: RunOptions, workers: int) -> Iterator[BatchJob]:
+    """The batches still to fly, one at a time: for each controller, its missing flights in chunks of the
+    batch size. A generator: a campaign of 10^9 flights plans its first batch without listing the rest."""
+    size = batch_size(spec, options, workers)
     for controller in spec.controllers:
-        missing = [k for k in range(spec.flights) if (k, controller) not in done]
-        for start in range(0, len(missing), size):
-            jobs.append(BatchJob(spec, controller, tuple(missing[start:start + size]),
-                                 options.vehicle_file, options.gains_file))
-    return jobs
+        flights: list[int] = []
+        for k in range(spec.flights):
+            if (k, controller) in done:
+                continue
+            flights.append(k)
+            if len(flights) == size:
+                yield BatchJob(spec, controller, tuple(flights), options.vehicle_file, options.gains_file)
+                flights = []
+        if flights:
+            yield BatchJob(spec, controller, tuple(flights), options.vehicle_file, options.gains_file)
+
+
+def flights_to_fly(spec: CampaignSpec, done: set) -> int:
+    """How many (flight, controller) pairs of ``spec`` are not in ``done``."""
+    flown = sum(1 for k, controller in done if controller in spec.controllers and 0 <= k < spec.flights)
+    return spec.flights * len(spec.controllers) - flown
+
+
+def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
+    """ParameterError if ``out_dir`` cannot take this campaign (touches nothing): it is a file, or it holds a
+    campaign and ``resume`` is off, or it holds another spec's campaign."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ParameterError(f'--out: {out_dir} exists and is not a folder; choose another --out')
+    base = out_dir
+    while not base.exists() and base != base.parent:
+        base = base.parent
+    if not base.is_dir():
+        raise ParameterError(f'--out: {base} is not a folder, so {out_dir} cannot be created')
+    flights_path, spec_path = out_dir / FLIGHTS_FILE, out_dir / SPEC_FILE
+    if flights_path.exists() or spec_path.exists():
+        if not resume:
+            raise ParameterError(f'--out: {out_dir} already holds a campaign; pass --resume (resume=True from '
+                                 'Python) to fly only its missing flights, or choose another folder')
+        stored = yaml.safe_load(spec_path.read_text()) if spec_path.exists() else None
+        if stored != spec.to_mapping():
+            raise ParameterError(f'--resume: the campaign in {out_dir} was run with another spec '
+                                 f'({spec_path}); resume it with the same spec and overrides')
 
 
 def prepare_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> set:
@@ -77,21 +126,53 @@ def prepare_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> set:
     A folder that already holds a campaign is only continued with ``resume``, and only if its spec
     is the same one (overrides included).
     """
-    flights_path, spec_path = out_dir / FLIGHTS_FILE, out_dir / SPEC_FILE
-    document = spec.to_mapping()
-    if flights_path.exists() or spec_path.exists():
-        if not resume:
-            raise ParameterError(f'--out: {out_dir} already holds a campaign; pass --resume to fly only its '
-                                 'missing flights, or choose another folder')
-        stored = yaml.safe_load(spec_path.read_text()) if spec_path.exists() else None
-        if stored != document:
-            raise ParameterError(f'--resume: the campaign in {out_dir} was run with another spec '
-                                 f'({spec_path}); resume it with the same spec and overrides')
+    check_output(spec, out_dir, resume)
     out_dir.mkdir(parents=True, exist_ok=True)
     if not os.access(out_dir, os.W_OK):
         raise ParameterError(f'--out: {out_dir} is not writable')
-    spec_path.write_text(yaml.safe_dump(document, sort_keys=False))
-    return {(r['flight'], r['controller']) for r in read_flights(flights_path)}
+    (out_dir / SPEC_FILE).write_text(yaml.safe_dump(spec.to_mapping(), sort_keys=False))
+    return {(r['flight'], r['controller']) for r in read_flights(out_dir / FLIGHTS_FILE)}
+
+
+def check_main_is_guarded(function: str = 'run_campaign') -> None:
+    """ParameterError if the running script calls ``function`` outside ``if __name__ == '__main__':``.
+
+    Local worker processes start with the spawn method, which imports the main script again in each of
+    them: an unguarded call would start the campaign again in every worker. Nothing to check when the
+    main module has no file (an interactive session, ``python -c``) or is a package's ``__main__``
+    (which multiprocessing does not import again), or when the call is not made while the script's
+    top level runs.
+    """
+    main = sys.modules.get('__main__')
+    path = getattr(main, '__file__', None)
+    name = getattr(getattr(main, '__spec__', None), 'name', None) or ''
+    if path is None or name == '__main__' or name.endswith('.__main__'):
+        return
+    frame = sys._getframe(1)
+    while frame is not None and not (frame.f_globals is vars(main) and frame.f_code.co_name == '<module>'):
+        frame = frame.f_back
+    if frame is None:
+        return
+    try:
+        tree = ast.parse(Path(path).read_text(), path)
+    except (OSError, SyntaxError, ValueError):
+        return
+    if not any(_is_main_guard(node) and node.body[0].lineno <= frame.f_lineno <= node.body[-1].end_lineno
+               for node in tree.body):
+        raise ParameterError(
+            f'{function}: {path} calls it outside `if __name__ == \'__main__\':` (line {frame.f_lineno}); every '
+            'local worker process imports that script again as it starts and would run the campaign again. '
+            f'Write the call as\n    if __name__ == \'__main__\':\n        {function}(...)')
+
+
+def _is_main_guard(node: ast.stmt) -> bool:
+    """Whether ``node`` is ``if __name__ == '__main__':`` (either way round)."""
+    if not isinstance(node, ast.If) or not isinstance(node.test, ast.Compare) or len(node.test.ops) != 1 \
+            or not isinstance(node.test.ops[0], ast.Eq):
+        return False
+    sides = [node.test.left, node.test.comparators[0]]
+    return (any(isinstance(side, ast.Name) and side.id == '__name__' for side in sides)
+            and any(isinstance(side, ast.Constant) and side.value == '__main__' for side in sides))
 
 
 @contextlib.contextmanager
@@ -99,31 +180,42 @@ def writing(out_dir: Path):
     """Hold the output folder for one run (an exclusive lock on DIR/.campaign.lock, created with the
     folder): a second campaign writing the same folder, such as a ``--resume`` while the first still
     flies, would append the same flights twice; it is refused with ParameterError naming the holder."""
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / LOCK_FILE
-    with open(path, 'a+') as lock:
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            lock.seek(0)
-            raise ParameterError(f'--out: another campaign is writing {out_dir} (process {lock.read().strip()}); '
-                                 'let it finish, or stop it and continue with --resume') from None
-        lock.truncate(0)
-        lock.write(f'{os.getpid()}\n')
-        lock.flush()
-        try:
-            yield
-        finally:
-            path.unlink(missing_ok=True)   # still held: no other run took it in between
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise ParameterError(f'--out: {out_dir} cannot be created: a file is in its place') from None
+    with FileLock(out_dir / LOCK_FILE,
+                  lambda holder: f'--out: another campaign is writing {out_dir} (process {holder}); let it '
+                                 'finish, or stop it and continue with --resume (resume=True from Python)'):
+        yield
 
 
 def _ignore_sigint() -> None:
-    """Worker processes leave Ctrl-C to the parent, which stops them between batches."""
+    """Worker processes leave Ctrl-C to the parent, which terminates them."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@contextlib.contextmanager
+def sigterm_interrupts():
+    """SIGTERM raises KeyboardInterrupt here as Ctrl-C does, so that a terminated campaign stops its workers
+    and closes flights.csv (only in the main thread, where signal handlers can be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt(f'signal {signum}')
+
+    previous = signal.signal(signal.SIGTERM, interrupt)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 class _LocalPool:
     def __init__(self, workers: int):
+        self.workers = workers
         self.executor = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context('spawn'),
                                             initializer=_ignore_sigint)
 
@@ -131,8 +223,9 @@ class _LocalPool:
         return self.executor.submit(fly_batch, job)
 
     @staticmethod
-    def as_completed(futures):
-        return as_completed(futures)
+    def wait(futures) -> set:
+        """The futures of ``futures`` that are done, once one is (interruptible by a signal)."""
+        return wait(futures, return_when=FIRST_COMPLETED).done
 
     def close(self, cancel: bool) -> None:
         if cancel:
@@ -152,12 +245,18 @@ class _DaskPool:
         except (OSError, TimeoutError) as error:
             raise ParameterError(f'--scheduler: cannot reach a Dask scheduler at {address} ({error})') from error
 
-    def submit(self, job):
-        return self.client.submit(fly_batch, job, pure=False)
-
-    def as_completed(self, futures):
+        self.workers = max(1, sum(self.client.nthreads().values()))
         from distributed import as_completed as dask_as_completed
-        return dask_as_completed(futures, loop=self.client.loop)
+        self.finished = dask_as_completed(loop=self.client.loop)
+
+    def submit(self, job):
+        future = self.client.submit(fly_batch, job, pure=False)
+        self.finished.add(future)
+        return future
+
+    def wait(self, futures) -> set:
+        """The next finished future (every future submitted is one of ``futures`` until it is returned)."""
+        return {next(self.finished)}
 
     def close(self, cancel: bool) -> None:
         self.client.close()
@@ -174,32 +273,54 @@ class CampaignOutcome:
 def run_campaign(spec: CampaignSpec, out_dir: Path, options: RunOptions) -> CampaignOutcome:
     """Fly every missing flight of ``spec`` into ``out_dir``, then write campaign.json and report.html.
 
-    Raises ParameterError on invalid options (before anything flies) and KeyboardInterrupt after
-    stopping the workers on Ctrl-C (every finished batch is in flights.csv).
+    Raises ParameterError on invalid options (before anything flies or ``out_dir`` is touched) and
+    KeyboardInterrupt after stopping the workers on Ctrl-C or SIGTERM (every finished batch is in
+    flights.csv). From a script, call it under ``if __name__ == '__main__':`` (local workers import the
+    script again; see :func:`check_main_is_guarded`).
     """
+    out_dir = Path(out_dir)
     workers = options.worker_count()
+    if options.scheduler is None:
+        check_main_is_guarded()
     # files, rates and every controller's gains valid before flying
     CampaignSetup.of(spec, options.vehicle_file, options.gains_file).check_controllers(spec.controllers)
-    with writing(out_dir):
-        return _fly_missing(spec, out_dir, options, workers)
+    check_output(spec, out_dir, options.resume)
+    with sigterm_interrupts():
+        if options.scheduler is None:
+            _compile(spec, options)
+        with writing(out_dir):
+            return _fly_missing(spec, out_dir, options, workers)
+
+
+def _compile(spec: CampaignSpec, options: RunOptions) -> None:
+    """Compile the kernels (or load them from numba's cache) here, said with the time it took."""
+    say = (lambda text, end='\n': print(text, end=end, file=sys.stderr, flush=True)) if options.progress \
+        else (lambda text, end='\n': None)
+    say('compiling kernels (numba; loaded from its cache after the first time)...', end=' ')
+    started = time.perf_counter()
+    compile_kernels(spec, options.vehicle_file, options.gains_file)
+    say(f'{time.perf_counter() - started:.1f} s (the worker processes load them from the cache)')
 
 
 def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers: int) -> CampaignOutcome:
     done = prepare_output(spec, out_dir, options.resume)
+    total = flights_to_fly(spec, done)
     jobs = plan_jobs(spec, done, options, workers)
-    total = sum(len(job.flights) for job in jobs)
     flights = FlightsFile(out_dir / FLIGHTS_FILE, COLUMNS)
     started = time.perf_counter()
     steps = 0
-    progress = _progress_bar(total, len(done), options.progress)
-    pool = _DaskPool(options.scheduler) if options.scheduler else _LocalPool(min(workers, max(1, len(jobs))))
+    pool = (_DaskPool(options.scheduler) if options.scheduler
+            else _LocalPool(min(workers, max(1, math.ceil(total / batch_size(spec, options, workers))))))
+    progress = _progress_bar(total, spec.flights * len(spec.controllers) - total, options.progress)
     cancelled = False
     try:
-        for future in pool.as_completed([pool.submit(job) for job in jobs]):
-            rows = future.result()
-            flights.append(rows)
-            steps += sum(r['control_steps'] for r in rows)
-            progress.update(len(rows))
+        pending: set = set()
+        for job in jobs:
+            pending.add(pool.submit(job))
+            while len(pending) >= QUEUED_PER_WORKER * pool.workers:
+                pending, steps = _collect(pool, pending, flights, progress, steps)
+        while pending:
+            pending, steps = _collect(pool, pending, flights, progress, steps)
     except BaseException:
         cancelled = True
         raise
@@ -210,6 +331,18 @@ def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers
     wall = time.perf_counter() - started
     summary_path = write_results(spec, out_dir, wall_time_s=wall, vehicle_steps=steps)
     return CampaignOutcome(total, wall, steps, summary_path)
+
+
+def _collect(pool, pending: set, flights: FlightsFile, progress, steps: int) -> tuple[set, int]:
+    """Wait for a batch to finish; append the rows of every finished one. The batches still pending, and
+    the control steps flown so far."""
+    finished = pool.wait(pending)
+    for future in finished:
+        rows = future.result()
+        flights.append(rows)
+        steps += sum(r['control_steps'] for r in rows)
+        progress.update(len(rows))
+    return pending - finished, steps
 
 
 def _progress_bar(total: int, already: int, enabled: bool):

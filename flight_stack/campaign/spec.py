@@ -281,14 +281,36 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
     return spec
 
 
-def load_spec(path: str | Path) -> CampaignSpec:
-    """Read and validate a ``SPEC.yaml``; errors name the file and the key."""
+#: the specs shipped with the package (a clone's campaigns/ folder links here)
+SHIPPED_SPECS = Path(__file__).resolve().parent / 'specs'
+
+
+def shipped_specs() -> list[Path]:
+    """The shipped spec files, by name."""
+    return sorted(SHIPPED_SPECS.glob('*.yaml'))
+
+
+def locate_spec(path: str | Path) -> Path:
+    """``path`` if it exists, else the shipped spec of that name (``paper-robustness``,
+    ``paper-robustness.yaml`` or ``campaigns/paper-robustness.yaml``), else ``path`` as given."""
     path = Path(path)
+    if path.exists():
+        return path
+    name = path.name if path.suffix == '.yaml' else f'{path.name}.yaml'
+    shipped = SHIPPED_SPECS / name
+    return shipped if shipped.is_file() and path.parent in (Path('.'), Path('campaigns')) else path
+
+
+def load_spec(path: str | Path) -> CampaignSpec:
+    """Read and validate a ``SPEC.yaml`` (a file, or a shipped spec by name: :func:`locate_spec`); errors
+    name the file and the key."""
+    path = locate_spec(path)
     try:
         text = path.read_text()
         document = yaml.safe_load(text)
     except OSError as error:
-        raise ParameterError(f'campaign spec {path}: {error.strerror}') from error
+        raise ParameterError(f'campaign spec {path}: {error.strerror} (shipped specs: '
+                             f'{", ".join(p.stem for p in shipped_specs())})') from error
     except yaml.YAMLError as error:
         raise ParameterError(f'campaign spec {path}: not valid YAML ({error})') from error
     try:

@@ -59,7 +59,7 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.frames import wrap_angle
-from quad_msgs_bridge.numeric import namespace_for, select
+from quad_msgs_bridge.numeric import BATCH, namespace_for, select
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, controls_from_forces
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
@@ -84,9 +84,45 @@ class ControlOutput(NamedTuple):
     attitude_reference: tuple[float, float, float]  #: phi_d, theta_d, psi_d [rad]
 
 
-def check_finite(t: float, state: Sequence, reference: ReferenceSample):
-    """The numeric namespace of ``state``; ValueError if any value of the state or the reference is not finite."""
-    xp = namespace_for(state[0])
+STATE_LAYOUT = 'x, y, z [m, world ENU], vx, vy, vz [m/s, world], phi, theta, psi [rad], p, q, r [rad/s, body FLU]'
+
+
+def check_inputs(t: float, state: Sequence, reference: ReferenceSample, batch: int | None):
+    """The numeric namespace of ``state``, after checking the arguments of ``update``: ValueError naming
+    the argument and what it should be (``t`` a finite time [s]; ``state`` 12 numbers for one vehicle,
+    12 arrays of ``batch`` values for a batch; ``reference`` a ReferenceSample), or if any value of the
+    state or the reference is not finite. Cheap: it runs at every control step."""
+    if not isinstance(reference, ReferenceSample):
+        raise ValueError(f'reference: expected a quad_msgs_bridge.reference.ReferenceSample, '
+                         f'got {type(reference).__name__}')
+    try:
+        if not math.isfinite(t):
+            raise ValueError(f't: the time must be finite [s], got {t}')
+    except TypeError:
+        raise ValueError(f't: expected a number of seconds, got {type(t).__name__}') from None
+    shape = np.shape(state) if isinstance(state, np.ndarray) else None
+    try:
+        count = len(state)
+    except TypeError:
+        raise ValueError(f'state: expected a sequence of 12 values ({STATE_LAYOUT}), '
+                         f'got {type(state).__name__}') from None
+    expected = ('12 numbers' if batch is None else f'12 arrays of {batch} values (shape (12, {batch}))')
+    if count != 12:
+        got = f'an array of shape {shape}' if shape is not None else f'{count} values'
+        raise ValueError(f'state: expected {expected} ({STATE_LAYOUT}), got {got}')
+    xp = namespace_for(*state)
+    if batch is None:
+        if xp is BATCH:
+            raise ValueError(f'state: a single-vehicle controller takes 12 numbers ({STATE_LAYOUT}), got arrays '
+                             f'(shape {np.shape(state)}); for a batch of B vehicles build it with batch=B and pass '
+                             '12 arrays of B values')
+    else:
+        for value in state:
+            if not isinstance(value, np.ndarray) or value.shape != (batch,):
+                raise ValueError(f'state: a controller of a batch of {batch} vehicles takes {expected}, got '
+                                 f'{"a number" if np.ndim(value) == 0 else f"an array of shape {np.shape(value)}"} '
+                                 'among them')
+        xp = BATCH
     values = (*state, *reference.position, *reference.velocity, *reference.acceleration,
               reference.yaw, reference.yaw_rate, reference.yaw_acceleration, *reference.jerk, *reference.snap)
     if not xp.all_finite(values):
@@ -210,7 +246,7 @@ class CascadedController:
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
                  attitude_rates: str = 'filter', measurement_filter_hz: float = 0.0, takeoff_height: float = 0.0,
                  velocity_filter_hz: float = 0.0, low_altitude_max_tilt: float | None = None,
-                 low_altitude_height: float = 0.0):
+                 low_altitude_height: float = 0.0, batch: int | None = None):
         """``measurement_filter_hz`` > 0: the laws see position and angles through a complementary
         filter of that crossover (:mod:`.estimation`); 0 feeds them the measurement as it is.
         ``velocity_filter_hz`` > 0: they see the measured velocities through a first-order low-pass
@@ -224,13 +260,15 @@ class CascadedController:
         from the first update (paper).
 
         ``max_tilt``, ``low_altitude_max_tilt`` [rad], ``low_altitude_height`` [m]: the tilt limit by
-        (filtered) height, :class:`TiltLimit`."""
+        (filtered) height, :class:`TiltLimit`. ``batch``: None for one vehicle, or the number of
+        vehicles B it steps at once (what :meth:`update` accepts)."""
         missing = [axis for axis in AXES if axis not in laws]
         if missing:
             raise ValueError(f'controller {name}: no law for axes {missing}')
         self.name = name
         self.params = params
         self.laws = laws
+        self.batch = batch
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.tilt_limit = TiltLimit(max_tilt, low_altitude_max_tilt, low_altitude_height)
         tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
@@ -250,10 +288,11 @@ class CascadedController:
     def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
         """Rotor thrusts [N] for the 12-state ``state`` and the reference at the same instant t [s].
 
-        Raises ValueError on a non-finite state or reference (of any vehicle of a batch), before any
-        law (or its learning) runs.
+        Raises ValueError on a state of the wrong shape (see :func:`check_inputs`), a time or a reference
+        that is not one, or a non-finite state or reference (of any vehicle of a batch), before any law (or
+        its learning) runs.
         """
-        xp = check_finite(t, state, reference)
+        xp = check_inputs(t, state, reference, self.batch)
         p = self.params
         if self.measurement_filter is not None:
             state = self.measurement_filter(state)

@@ -1,6 +1,8 @@
 """Building a controller by name from the gains file (``config/controller.yaml``)."""
 from __future__ import annotations
 
+import difflib
+import functools
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -58,7 +60,36 @@ def load_gains(path: str | Path | None = None) -> dict:
         raise ParameterError(f'controller file {path}: not valid YAML ({error})') from error
     if not isinstance(gains, dict):
         raise ParameterError(f'controller file {path}: expected a mapping')
-    return ros_parameters(gains)
+    gains = ros_parameters(gains)
+    try:
+        check_gain_names(gains)
+    except ParameterError as error:
+        raise ParameterError(f'controller file {path}: {error}') from error
+    return gains
+
+
+@functools.lru_cache(maxsize=1)
+def gain_names() -> frozenset[str]:
+    """Every gain a gains file may hold, flattened ('common.lambda.x', ...): those of the packaged file."""
+    document = yaml.safe_load(DEFAULT_CONTROLLER_FILE.read_text())
+    return frozenset(flatten_gains(ros_parameters(document)))
+
+
+def _did_you_mean(name: str, candidates) -> str:
+    """' (did you mean X?)' for the closest of ``candidates`` to ``name``, or ''."""
+    close = difflib.get_close_matches(name, sorted(candidates), n=1)
+    return f' (did you mean {close[0]}?)' if close else ''
+
+
+def check_gain_names(gains: Mapping[str, Any]) -> None:
+    """ParameterError naming the first gain of ``gains`` (a tree, as in the gains file) that is not a gain,
+    with the closest valid name: a misspelt gain would otherwise fly silently with its default."""
+    if not isinstance(gains, Mapping):
+        raise ParameterError(f'gains: expected a mapping, got {type(gains).__name__}')
+    valid = gain_names()
+    for name in flatten_gains(gains):
+        if name not in valid:
+            raise ParameterError(f'{name}: unknown gain{_did_you_mean(name, valid)}')
 
 
 NODE_PARAMETERS = ('controller', 'vehicle_file', 'gains_file', 'goal_speed', 'odom_timeout')
@@ -81,11 +112,21 @@ def ros_parameters(document: dict) -> dict:
 
 def _get(tree: Mapping[str, Any], dotted: str) -> Any:
     node: Any = tree
+    parents: list[str] = []
     for key in dotted.split('.'):
         if not isinstance(node, Mapping) or key not in node:
-            raise ParameterError(f'{dotted}: missing')
+            name = '.'.join([*parents, key])
+            siblings = ['.'.join([*parents, str(k)]) for k in node] if isinstance(node, Mapping) else []
+            unknown = [sibling for sibling in siblings if not _is_gain_prefix(sibling)]
+            raise ParameterError(f'{name}: missing{_did_you_mean(name, unknown)}')
         node = node[key]
+        parents.append(key)
     return node
+
+
+def _is_gain_prefix(name: str) -> bool:
+    """Whether ``name`` is a gain or a section of gains ('common.lambda')."""
+    return any(valid == name or valid.startswith(name + '.') for valid in gain_names())
 
 
 def _positive(tree, dotted: str) -> float:
@@ -126,6 +167,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
     (states of numpy arrays of B values; every vehicle has its own network weights).
     """
     gains = load_gains() if gains is None else gains
+    check_gain_names(gains)
     dt = control_period(gains)
     lam = {axis: _positive(gains, f'common.lambda.{axis}') for axis in AXES}
     structure = dict(max_tilt=_positive(gains, 'common.max_tilt'),
@@ -136,7 +178,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
     if kind == 'se3':
         se3_gains = {axis: tuple(_non_negative(gains, f'se3.axes.{axis}.{name}')
                                  for name in ('k_error', 'k_rate', 'k_integral', 'integral_limit')) for axis in AXES}
-        return SE3Controller(kind, params, se3_gains, lam, dt, **structure)
+        return SE3Controller(kind, params, se3_gains, lam, dt, **structure, batch=batch)
     if kind == 'nnit2fsmc' or kind in ABLATIONS:
         laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch) for axis in AXES}
     elif kind in ('smc-sign', 'smc-sat'):
@@ -164,7 +206,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
     else:
         raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
     return CascadedController(
-        kind, params, laws, dt, **structure,
+        kind, params, laws, dt, **structure, batch=batch,
         attitude_rates=_get(gains, 'common.attitude_rates'),
         measurement_filter_hz=(_non_negative(gains, 'nnit2fsmc.measurement_filter_hz')
                                if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0),

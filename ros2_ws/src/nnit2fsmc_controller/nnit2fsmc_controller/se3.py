@@ -47,7 +47,7 @@ from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
 
 from .axis_laws import AxisOutput
-from .controller import AXES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_finite
+from .controller import AXES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_inputs
 
 #: minimum vertical part of the desired force, in units of m g (keeps b3_d pointing up)
 MIN_LIFT = 0.1
@@ -102,9 +102,11 @@ class SE3Controller:
 
     def __init__(self, name: str, params: VehicleParams, gains: dict, lam: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
-                 low_altitude_max_tilt: float | None = None, low_altitude_height: float = 0.0):
+                 low_altitude_max_tilt: float | None = None, low_altitude_height: float = 0.0,
+                 batch: int | None = None):
         self.name = name
         self.params = params
+        self.batch = batch   #: None: one vehicle; B: update takes 12 arrays of B values
         self.gains = {axis: tuple(check_number(f'se3.axes.{axis}', value, 0.0) for value in gains[axis])
                       for axis in AXES}
         self.lam = {axis: check_number('lambda', lam[axis], 0.0, low_inclusive=False) for axis in AXES}
@@ -131,9 +133,10 @@ class SE3Controller:
     def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
         """Rotor thrusts [N] for the 12-state ``state`` and the reference at the same instant t [s].
 
-        Raises ValueError on a non-finite state or reference, before any state changes.
+        Raises ValueError on a state of the wrong shape, a time or a reference that is not one, or a
+        non-finite state or reference, before any state changes (:func:`.controller.check_inputs`).
         """
-        xp = check_finite(t, state, reference)
+        xp = check_inputs(t, state, reference, self.batch)
         p = self.params
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         position_axes, attitude_axes = AXES[:3], AXES[3:]
