@@ -13,8 +13,8 @@ import pytest
 
 from flight_stack.closed_loop import FailureRules
 from flight_stack.embedded import Perturbations, fly_embedded
-from nnit2fsmc_controller.factory import (ABLATIONS, CONTROLLERS, PAPER_FAITHFUL, build_controller, flatten_gains,
-                                          load_gains, unflatten_gains)
+from nnit2fsmc_controller.factory import (ABLATIONS, CONTROLLERS, PAPER_FAITHFUL, build_controller,
+                                          build_measurement_stage, flatten_gains, load_gains, unflatten_gains)
 from nnit2fsmc_controller.estimation import VelocityFilter
 from nnit2fsmc_controller.it2_fuzzy import CENTRES, CONSEQUENTS, LABELS, RULES
 from nnit2fsmc_controller.neural_network import EquivalentControlNetwork
@@ -133,8 +133,7 @@ def weights(network):
 def test_below_the_takeoff_height_only_the_z_network_learns(batch):
     """takeoff_height: on the ground the x, y and attitude networks hold and the desired tilt is 0; z learns
     (it lifts the vehicle)."""
-    gains = unflatten_gains({**flatten_gains(load_gains()), 'nnit2fsmc.takeoff_height': 0.05,
-                             'nnit2fsmc.measurement_filter_hz': 0.0})
+    gains = unflatten_gains({**flatten_gains(load_gains()), 'nnit2fsmc.takeoff_height': 0.05})
     controller = build_controller('nnit2fsmc', PARAMS, gains, batch=batch)
     start = {axis: weights(law.network).copy() for axis, law in controller.laws.items()}
     reference = Helix().sample(0.5)           # 0.5 s into the helix (its height: 5 cm)
@@ -161,8 +160,8 @@ def test_below_the_takeoff_height_only_the_z_network_learns(batch):
 def test_the_takeoff_height_and_the_velocity_filter_are_off_in_the_paper_settings():
     gains = unflatten_gains({**flatten_gains(load_gains()), **PAPER_FAITHFUL})
     controller = build_controller('nnit2fsmc', PARAMS, gains)
-    assert controller.takeoff_height == 0.0 and controller.velocity_filter is None
-    assert controller.measurement_filter is None
+    assert controller.takeoff_height == 0.0
+    assert build_measurement_stage(gains).filters == ()
 
 
 def test_velocity_filter_is_a_first_order_low_pass_of_the_velocities_only():
@@ -334,3 +333,80 @@ def test_sensor_noise_does_not_blow_up_the_total_variation():
     _, metrics = fly(noise=SensorErrors(position=0.01, attitude=0.01))
     assert sum(metrics['chattering'].values()) < 100.0
     assert metrics['rmse_position_m'] < 0.01
+
+
+class _Spy:
+    """A controller that records every state it is given, and otherwise is the controller it wraps."""
+
+    def __init__(self, controller):
+        self.wrapped, self.seen = controller, []
+
+    def update(self, t, state, reference):
+        self.seen.append([float(v) for v in state])
+        return self.wrapped.update(t, state, reference)
+
+    def __getattr__(self, name):
+        return getattr(self.wrapped, name)
+
+
+@pytest.mark.parametrize('kind', CONTROLLERS)
+def test_every_kind_reads_through_the_same_measurement_stage(kind, monkeypatch):
+    """The closed loop passes the noisy measurement through the gains' measurement stage, whatever the
+    controller: the controller reads exactly the stage's output for the odometry it received (replayed
+    here through a fresh stage), not the raw values."""
+    import flight_stack.embedded as embedded
+    spies, steps = [], []
+
+    def spied(*args, **kwargs):
+        spies.append(_Spy(build_controller(*args, **kwargs)))
+        return spies[-1]
+
+    class RecordingLoop(embedded.ClosedLoop):
+        def step(self):
+            steps.append(super().step())
+            return steps[-1]
+
+    monkeypatch.setattr(embedded, 'build_controller', spied)
+    monkeypatch.setattr(embedded, 'ClosedLoop', RecordingLoop)
+    gains = load_gains()
+    assert gains['common']['measurement_filter_hz'] > 0.0 and gains['common']['velocity_filter_hz'] > 0.0
+    streams = flight_streams(1, 0)
+    noise = SensorNoise(SensorErrors(position=0.01, velocity=0.02, attitude=0.01, body_rate=0.02), SensorErrors(),
+                        streams.sensor_noise, streams.sensor_bias)
+    fly_embedded(kind, make_scenario('hover', 0.2), PARAMS, DISTURBANCES, gains, 0.2, 1000.0,
+                 perturbations=Perturbations(sensor_noise=noise))
+    stage = build_measurement_stage(gains)
+    replayed = [stage(step.measured) for step in steps]
+    assert len(spies[0].seen) == len(steps) == 200
+    np.testing.assert_array_equal(spies[0].seen, replayed)
+    raw = np.array([step.measured for step in steps])
+    seen = np.array(spies[0].seen)
+    for component in (0, 1, 2, 3, 4, 5, 6, 7, 8):     # position, velocity, angles filtered; the rates are not
+        assert np.std(np.diff(seen[:, component])) < 0.5 * np.std(np.diff(raw[:, component])), component
+    np.testing.assert_array_equal(seen[:, 9:], raw[:, 9:])
+
+
+def test_the_measurement_stage_is_off_for_every_kind_without_its_gains_and_refuses_a_non_finite_state():
+    gains = unflatten_gains({**flatten_gains(load_gains()), 'common.measurement_filter_hz': 0.0,
+                             'common.velocity_filter_hz': 0.0})
+    stage = build_measurement_stage(gains)
+    state = [0.1 * i for i in range(12)]
+    assert stage.filters == () and stage(state) == state
+    on = build_measurement_stage(load_gains())
+    on(state)
+    with pytest.raises(ValueError, match='non-finite'):
+        on([math.nan] + state[1:])
+    assert on([v + 0.01 for v in state]) != [v + 0.01 for v in state]   # its estimate survived the refusal
+
+
+def test_a_campaign_spec_switches_the_measurement_stage_of_every_controller():
+    from flight_stack.campaign.batch import CampaignSetup
+    from flight_stack.campaign.spec import parse_spec
+    from quad_msgs_bridge.vehicle_params import ParameterError
+    base = {'scenario': 'hover', 'controllers': ['pid', 'nnit2fsmc'], 'flights': 1}
+    on = CampaignSetup.of(parse_spec(base)).gains['common']
+    off = CampaignSetup.of(parse_spec({**base, 'measurement_filters': False})).gains['common']
+    assert on['measurement_filter_hz'] > 0.0 and on['velocity_filter_hz'] > 0.0
+    assert off['measurement_filter_hz'] == 0.0 and off['velocity_filter_hz'] == 0.0
+    with pytest.raises(ParameterError, match='measurement_filters'):
+        parse_spec({**base, 'measurement_filters': 'yes'})
