@@ -449,3 +449,43 @@ def test_the_packaged_baselines_are_matched_at_the_small_signal_slope():
     assert gains.least_squares_slope(packaged) == pytest.approx(1.0054, abs=1e-4)
     x = packaged['nnit2fsmc']['axes']['x']
     assert packaged['pid']['axes']['x']['kd'] == pytest.approx(x['fuzzy_gain'] / x['input_scale'] / 1.2, rel=1e-3)
+
+
+def _hover_with_yaw_rate_bias(kind, bias, seconds=20.0):
+    """Mean true yaw error [rad] over the last 5 s of a hover at 1 m with a constant ``bias`` [rad/s] on the
+    measured yaw rate, every controller through the default measurement stage."""
+    from flight_stack.closed_loop import ClosedLoop
+    from nnit2fsmc_controller.trajectory import make_scenario
+    from quad_sim.model import QuadrotorModel
+    from quad_sim.simulator import Simulator
+    gains = load_gains()
+    controller = build_controller(kind, PARAMS, gains)
+    start = [0.0, 0.0, 1.0] + [0.0] * 9
+    simulator = Simulator(QuadrotorModel(PARAMS, DISTURBANCES.switched(False)), controller.dt, start)
+    simulator.forces = (PARAMS.hover_force,) * 4
+    hold = make_scenario('hover', seconds).sample(0.0)._replace(position=(0.0, 0.0, 1.0))
+
+    def biased(t, state):
+        return [*state[:11], state[11] + bias], None
+    loop = ClosedLoop(controller, simulator, lambda t: hold, 1, FailureRules(seconds, 1.0), observe=biased,
+                      measurement=build_measurement_stage(gains))
+    errors = []
+    for k in range(int(round(seconds / controller.dt))):
+        step = loop.step()
+        if step.time >= seconds - 5.0:
+            errors.append(step.truth[8] - hold.yaw)
+    return float(np.mean(errors)), gains
+
+
+@pytest.mark.parametrize('kind', ['nnit2fsmc', 'pid'])
+def test_a_constant_gyro_bias_leaves_the_steady_yaw_error_of_the_formula(kind):
+    """The NNIT2FSMC's adaptation (network and fuzzy term) drives the measured surface S = de + lambda e to 0,
+    so a bias b on the measured yaw rate leaves the estimated error -b / lambda; the PID's integral drives the
+    estimated error itself to 0. The complementary filter's estimate leads the true yaw by b / w
+    (w = 2 pi measurement_filter_hz: its steady state under a rate bias). True steady errors:
+    nnit2fsmc -b / lambda - b / w (14.1 mrad at b = 0.05 rad/s, lambda 4), pid -b / w (1.6 mrad)."""
+    bias = 0.05
+    error, gains = _hover_with_yaw_rate_bias(kind, bias)
+    w = 2 * math.pi * gains['common']['measurement_filter_hz']
+    expected = -bias / w - (bias / gains['common']['lambda']['psi'] if kind == 'nnit2fsmc' else 0.0)
+    assert error == pytest.approx(expected, rel=0.05)
