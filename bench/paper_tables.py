@@ -195,7 +195,8 @@ def fly(flight: Flight, gains: dict | None = None) -> Outcome:
                     if flight.thrust_factor != 1.0 else None)
     perturbations = Perturbations(sensor_noise=noise, true_vehicle=true_vehicle,
                                   delay=TransportDelay(flight.delay_steps) if flight.delay_steps else None,
-                                  motor_lag=MotorLag(flight.motor_lag) if flight.motor_lag > 0.0 else None)
+                                  motor_lag=(MotorLag(flight.motor_lag, 1.0 / flight.physics_rate)
+                                             if flight.motor_lag > 0.0 else None))
     FractionalDelaySimulator.lead = flight.delay_substeps
     embedded.Simulator = FractionalDelaySimulator if flight.delay_substeps else Simulator
     try:
