@@ -211,13 +211,17 @@ def main(argv=None) -> int:
     parser.add_argument('--max-delay', type=float, default=0.064, help='[s] delay bisection range (default 0.064)')
     parser.add_argument('--no-filters', action='store_true', help='also every figure with the measurement stage off')
     parser.add_argument('--linear-only', action='store_true', help='only the linearised margins (no flight)')
+    parser.add_argument('--gains', help='gains file (default: the packaged one), e.g. one of '
+                                        'bench/baseline_gains.py --matching rmse --out FILE')
     parser.add_argument('--jobs', type=int, default=1)
     parser.add_argument('--json', type=Path, help='also write the simulated figures as JSON')
     parser.add_argument('--out', type=Path)
     args = parser.parse_args(argv)
     kinds = [k.strip() for k in args.controllers.split(',') if k.strip()]
     params, _ = load_vehicle_file()
-    gains = load_gains()
+    gains = load_gains(args.gains)
+    if args.gains:
+        paper_tables.OVERRIDES['gains_file'] = args.gains
     lines = ['### Linearised axis loops (near S = 0; bench/margins.py)', '',
              '| controller | motor lag | delay margin [ms] (axis) | phase margin [deg] (axis) | '
              'gain margin (axis) | crossover [rad/s] (axis) |', '|---|---:|---:|---:|---:|---:|']

@@ -4,6 +4,8 @@
     .venv/bin/python bench/paper_tables.py                       # every experiment, every controller
     .venv/bin/python bench/paper_tables.py --experiments delay --controllers nnit2fsmc,pid
     .venv/bin/python bench/paper_tables.py --duration 20 --jobs 2 --out tables.md
+    .venv/bin/python bench/paper_tables.py --no-filters          # every controller without the measurement stage
+    .venv/bin/python bench/paper_tables.py --gains FILE          # e.g. baselines matched at equal nominal RMSE
 
 Every flight is an embedded flight (:func:`flight_stack.embedded.fly_embedded`, the code path of
 ``run_stack.py --backend embedded``) of the nominal vehicle with the section IV disturbances, the
@@ -173,9 +175,14 @@ class FractionalDelaySimulator(Simulator):
         super().advance(steps)
 
 
+#: Flight fields that every flight of a run takes (main's --gains and --no-filters)
+OVERRIDES: dict = {}
+
+
 def fly(flight: Flight, gains: dict | None = None) -> Outcome:
-    """Fly ``flight`` on the embedded backend and take its figures; ``gains``: instead of the packaged
-    gains (or of ``flight.gains_file``)."""
+    """Fly ``flight`` (with OVERRIDES) on the embedded backend and take its figures; ``gains``: instead of
+    the packaged gains (or of ``flight.gains_file``)."""
+    flight = replace(flight, **OVERRIDES)
     params, disturbances = load_vehicle_file()
     kind, faithful = kind_of(flight.controller), flight.controller.endswith(FAITHFUL)
     if gains is None and flight.gains_file is not None:
@@ -452,8 +459,17 @@ def main(argv=None) -> int:
     parser.add_argument('--duration', type=float, help='[s] every flight this long (default: the scenario length)')
     parser.add_argument('--rates', default=','.join(f'{r:g}' for r in DEFAULT_RATES), help='[Hz] control rates')
     parser.add_argument('--jobs', type=int, default=1, help='flights at a time (process pool; default 1)')
+    parser.add_argument('--gains', help='gains file for every flight (default: the packaged one), e.g. one of '
+                                        'bench/baseline_gains.py --matching rmse --out FILE')
+    parser.add_argument('--no-filters', action='store_true',
+                        help='every controller without its measurement stage (common.*_filter_hz 0)')
     parser.add_argument('--out', type=Path, help='also write the tables to this file')
     args = parser.parse_args(argv)
+    OVERRIDES.clear()
+    if args.gains:
+        OVERRIDES['gains_file'] = args.gains
+    if args.no_filters:
+        OVERRIDES['filters'] = False
     experiments = names(args.experiments)
     unknown = [e for e in experiments if e not in EXPERIMENTS]
     controllers = names(args.controllers) if args.controllers else list(factory.CONTROLLERS)
