@@ -85,10 +85,7 @@ def campaign(task) -> str:
     """'finished / flights, median RMSE [cm]' of one configuration's small campaign."""
     gains_file, flights, seed = task
     spec = replace(load_spec(ROOT / 'campaigns' / 'paper-robustness.yaml'), seed=seed)
-    rows = []
-    for start in range(0, flights, 25):
-        rows += fly_batch(BatchJob(spec, 'nnit2fsmc', tuple(range(start, min(flights, start + 25))),
-                                   gains_file=gains_file))
+    rows = fly_batch(BatchJob(spec, 'nnit2fsmc', tuple(range(flights)), gains_file=gains_file))   # one batch
     finished = [row for row in rows if not row['failure']]
     rmse = [100.0 * row['rmse_position_m'] for row in finished]
     median = statistics.median(rmse) if rmse else math.nan
