@@ -212,3 +212,22 @@ def test_a_fractional_delay_holds_the_previous_command_for_its_physics_steps():
         undelayed.set_forces(forces)
         undelayed.advance(4)
     assert split.state[2] != undelayed.state[2]     # the quarter-step delay is felt
+
+
+def test_a_flight_with_motor_lag_a_thrust_factor_and_no_filters_is_the_direct_flight():
+    """paper_tables.fly's motor lag, thrust factor (every rotor's thrust and torque) and measurement stage
+    off are what a direct embedded flight with those perturbations and gains flies."""
+    import dataclasses
+    from quad_sim.perturbations.actuation import MotorLag
+    params, disturbances = load_vehicle_file()
+    outcome = paper_tables.fly(paper_tables.Flight('pid', 'paper', DURATION, motor_lag=0.03, thrust_factor=1.2,
+                                                   filters=False))
+    gains = load_gains()
+    gains['common'].update(measurement_filter_hz=0.0, velocity_filter_hz=0.0)
+    true = dataclasses.replace(params, rotor_thrust_factors=(1.2,) * 4, rotor_drag_factors=(1.2,) * 4)
+    record = fly_embedded('pid', make_scenario('paper', DURATION), params, disturbances, gains, DURATION, 1000.0,
+                          perturbations=Perturbations(true_vehicle=true, motor_lag=MotorLag(0.03, 1e-3))).record
+    direct = flight_metrics(record, SETTLE, params.F_min, params.F_max)
+    assert outcome.rmse_cm == pytest.approx(100.0 * direct['rmse_position_m'], rel=1e-12)
+    assert outcome.rmse_cm != pytest.approx(paper_tables.fly(paper_tables.Flight('pid', 'paper', DURATION)).rmse_cm,
+                                            rel=1e-3)
