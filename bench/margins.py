@@ -19,8 +19,11 @@ fraction of a control step, bench/paper_tables.py ``FractionalDelaySimulator``):
 
 Criterion (bench/paper_tables.py ``instability``): the flight fails (non-finite, flipped, crashed,
 1 m from the reference after settling), or its position RMSE exceeds the absolute yardstick of
-2 cm, or its RMSE or its attitude chattering TV(U2) + TV(U3) over the last 20 s exceeds 10x the
-flight without the perturbation (with the same motor lag).
+2 cm, or its attitude chattering TV(U2) + TV(U3) over the last 20 s (a limit cycle) or, for the delay
+margins only, its RMSE exceeds 10x the flight without the perturbation (with the same motor lag).
+The gain margin leaves the relative RMSE out: more thrust than the nominal model says is also a
+model error of the hover feed-forward, whose transient multiplies a tiny nominal RMSE without any
+oscillation.
 
 **Linearised** (each axis loop alone, near its surface S = 0, as a continuous-time SISO loop
 L(s) = C(s) P(s) in units of the subsystem's q''):
@@ -173,7 +176,8 @@ def gain_margin(flight, undelayed) -> tuple[float, dict]:
     tried = {}
 
     def unstable(g):
-        tried[g] = paper_tables.instability(paper_tables.fly(replace(flight, thrust_factor=g)), undelayed)
+        tried[g] = paper_tables.instability(paper_tables.fly(replace(flight, thrust_factor=g)), undelayed,
+                                            relative_rmse=False)
         return tried[g] is not None
     if not unstable(MAX_GAIN):
         return math.inf, tried
@@ -188,9 +192,13 @@ def gain_margin(flight, undelayed) -> tuple[float, dict]:
 
 
 def simulated(task) -> dict:
-    """Every simulated figure of one (controller, duration, max_delay, filters)."""
-    kind, duration, max_delay, filters = task
+    """Every simulated figure of one (controller, duration, max_delay, filters, gain only)."""
+    kind, duration, max_delay, filters, gain_only = task
     out = {}
+    if gain_only:
+        flight = paper_tables.Flight(kind, 'paper', duration, physics_rate=PHYSICS_RATE, filters=filters)
+        factor, tried = gain_margin(flight, paper_tables.fly(flight))
+        return {'gain': {'factor': factor, 'why': tried.get(factor)}}
     for lag in (0.0, MOTOR_LAG):
         flight = paper_tables.Flight(kind, 'paper', duration, physics_rate=PHYSICS_RATE, motor_lag=lag,
                                      filters=filters)
@@ -211,6 +219,7 @@ def main(argv=None) -> int:
     parser.add_argument('--max-delay', type=float, default=0.064, help='[s] delay bisection range (default 0.064)')
     parser.add_argument('--no-filters', action='store_true', help='also every figure with the measurement stage off')
     parser.add_argument('--linear-only', action='store_true', help='only the linearised margins (no flight)')
+    parser.add_argument('--gain-only', action='store_true', help='of the simulated margins, only the gain margin')
     parser.add_argument('--gains', help='gains file (default: the packaged one), e.g. one of '
                                         'bench/baseline_gains.py --matching rmse --out FILE')
     parser.add_argument('--jobs', type=int, default=1)
@@ -236,9 +245,9 @@ def main(argv=None) -> int:
                          f'{m[gm_axis]["gain_margin"]:.3g} ({gm_axis}) | '
                          f'{m[worst]["crossovers"][0]:.4g} ({worst}) |')
     if not args.linear_only:
-        tasks = [(kind, args.duration, args.max_delay, True) for kind in kinds]
+        tasks = [(kind, args.duration, args.max_delay, True, args.gain_only) for kind in kinds]
         if args.no_filters:
-            tasks += [(kind, args.duration, args.max_delay, False) for kind in kinds]
+            tasks += [(kind, args.duration, args.max_delay, False, args.gain_only) for kind in kinds]
         results = dict(zip(tasks, paper_tables.run_all(simulated, tasks, max(1, args.jobs))))
         if args.json is not None:
             args.json.write_text(json.dumps({f'{t[0]}{"" if t[3] else " (no filters)"}': r
@@ -249,9 +258,12 @@ def main(argv=None) -> int:
                   'delay margin, 30 ms lag | gain margin |', '|---|---:|---:|---:|---:|---:|']
         for task, r in results.items():
             name = task[0] + ('' if task[3] else ' (no filters)')
-            no_lag, lag = r['delay_lag0'], r[f'delay_lag{MOTOR_LAG:g}']
             gain = r['gain']
             gain_text = f'> {MAX_GAIN:g}' if math.isinf(gain['factor']) else f'{gain["factor"]:.3g} ({gain["why"]})'
+            if task[4]:
+                lines.append(f'| {name} | | | | | {gain_text} |')
+                continue
+            no_lag, lag = r['delay_lag0'], r[f'delay_lag{MOTOR_LAG:g}']
             lines.append(f'| {name} | {no_lag["rmse_cm"]:.4g} | {no_lag["text"]} | {lag["rmse_cm"]:.4g} | '
                          f'{lag["text"]} | {gain_text} |')
     text = '\n'.join(lines)

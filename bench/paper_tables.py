@@ -219,15 +219,17 @@ def fly(flight: Flight, gains: dict | None = None) -> Outcome:
     return Outcome(metrics, tail['chattering'], result.failure, result.failure_time_s)
 
 
-def instability(outcome: Outcome, undelayed: Outcome) -> str | None:
+def instability(outcome: Outcome, undelayed: Outcome, relative_rmse: bool = True) -> str | None:
     """Why ``outcome`` is unstable by the delay criterion of the module docstring (failed, or a 10x
     growth of the attitude chattering over the last 20 s or of the RMSE against the flight without
-    delay, ``undelayed``, or an RMSE above the absolute yardstick), or None when it is not."""
+    delay, ``undelayed``, or an RMSE above the absolute yardstick), or None when it is not.
+    ``relative_rmse`` False leaves the 10x RMSE growth out (the gain margin: a thrust factor is also a
+    model error of the hover feed-forward, whose transient is not an instability)."""
     if outcome.failure is not None:
         return outcome.failure
-    for name, delayed, without in (('TV(U2)+TV(U3)', outcome.attitude_tail_chattering,
-                                    undelayed.attitude_tail_chattering),
-                                   ('RMSE', outcome.rmse_cm, undelayed.rmse_cm)):
+    growths = (('TV(U2)+TV(U3)', outcome.attitude_tail_chattering, undelayed.attitude_tail_chattering),
+               ('RMSE', outcome.rmse_cm, undelayed.rmse_cm))
+    for name, delayed, without in growths[:2 if relative_rmse else 1]:
         if not delayed <= INSTABILITY_FACTOR * without:      # (NaN, of a failed flight, is unstable)
             return (f'{name} x{delayed / without:.3g}' if without > 0.0
                     else f'{name} {delayed:.3g}, no delay {without:.3g}')

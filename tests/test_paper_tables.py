@@ -231,3 +231,10 @@ def test_a_flight_with_motor_lag_a_thrust_factor_and_no_filters_is_the_direct_fl
     assert outcome.rmse_cm == pytest.approx(100.0 * direct['rmse_position_m'], rel=1e-12)
     assert outcome.rmse_cm != pytest.approx(paper_tables.fly(paper_tables.Flight('pid', 'paper', DURATION)).rmse_cm,
                                             rel=1e-3)
+
+
+def test_the_gain_criterion_leaves_the_relative_rmse_out():
+    assert paper_tables.instability(outcome(0.5, 1.0), outcome(0.02, 1.0)) == 'RMSE x25'
+    assert paper_tables.instability(outcome(0.5, 1.0), outcome(0.02, 1.0), relative_rmse=False) is None
+    assert paper_tables.instability(outcome(0.5, 12.0), outcome(0.02, 1.0), relative_rmse=False) == 'TV(U2)+TV(U3) x12'
+    assert paper_tables.instability(outcome(2.5, 1.0), outcome(0.02, 1.0), relative_rmse=False) == 'RMSE 2.5 cm > 2 cm'
