@@ -4,6 +4,7 @@
     python3 run_stack.py campaign campaigns/paper-robustness.yaml --seed 101 --flights 1000 \\
         --controllers nnit2fsmc,pid,se3,smc-integral --out out/heldout-101        # (and 102, 103)
     .venv/bin/python bench/heldout_table.py out/heldout-101 out/heldout-102 out/heldout-103
+    .venv/bin/python bench/heldout_table.py --first 250 out/heldout-101     # flights 0..249 only
 
 Columns: flights flown, finished (with the 95 % Wilson interval), finished with RMSE < 10 cm (of all
 flights flown, the target of issue 21, with its interval), RMSE p50 / p95 of the finished flights [cm],
@@ -31,11 +32,14 @@ def rows_of(folder: Path) -> tuple[int, list[dict]]:
     return seed, read_flights(folder / 'flights.csv')
 
 
-def table(folders) -> list[str]:
+def table(folders, first: int | None = None) -> list[str]:
+    """The table's lines; ``first``: only flights 0..first-1 of each folder (the same vehicles for every
+    controller of a seed: a paired comparison with a campaign flown with fewer flights)."""
     lines = ['| controller | seed | flights | finished | 95 % interval | finished with RMSE < 10 cm | 95 % interval | '
              'RMSE p50 / p95 [cm] | TV total p50 [N/s] |', '|---|---:|---:|---:|---|---:|---|---|---:|']
     for folder in folders:
         seed, rows = rows_of(Path(folder))
+        rows = [row for row in rows if first is None or row['flight'] < first]
         for controller in dict.fromkeys(row['controller'] for row in rows):
             mine = [row for row in rows if row['controller'] == controller]
             finished = [row for row in mine if row['finished']]
@@ -53,11 +57,12 @@ def table(folders) -> list[str]:
 
 
 def main(argv=None) -> int:
-    folders = sys.argv[1:] if argv is None else argv
-    if not folders:
-        print(__doc__)
-        return 2
-    print('\n'.join(table(folders)))
+    import argparse
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('folders', nargs='+', type=Path, help='campaign output folders')
+    parser.add_argument('--first', type=int, default=None, help='only flights 0..N-1 of each folder')
+    args = parser.parse_args(argv)
+    print('\n'.join(table(args.folders, args.first)))
     return 0
 
 
