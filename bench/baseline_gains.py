@@ -4,11 +4,19 @@
 The procedure of docs/BASELINES.md, written out so that it can be rerun after a change of the
 NNIT2FSMC gains, of the vehicle or of the campaign:
 
-1. Bandwidth match. The IT2 fuzzy term is, to 3.3 % of its gain, the linear saturation
-   -fuzzy_gain sat(S / input_scale); its least-squares slope over the universe is
-   fuzzy_gain / input_scale per unit of S (measured here). Divided into the units of q'' by the
+1. Bandwidth match (``--matching``). ``slope`` (default): the small-signal slope of the IT2 term at
+   S = 0, derived from the membership functions (:func:`small_signal_slope`): with u = S / input_scale
+   small, ZE and PM fire, the upper grades are 1 - 2u and 2u, the lower ones H (1 - 2u/(2 w)) and 0
+   (PM's lower function, of half-width w < 0.5, starts only at u = 1/2 - w), and the KM output is
+   -gain u / (2 (H + 2u - 2u H / (2 w))), whose slope at u = 0 is gain / (2 H) per unit of u: the
+   loop gain of the NNIT2FSMC near its surface, where a tracking flight lives. ``least-squares``: the
+   slope of the best line through the whole universe (the earlier matching, about 1.005 gain /
+   input_scale: stiffer than the IT2 term near S = 0 by about 21 %). ``rmse`` and ``chattering``:
+   the slope matching scaled by the factor c per baseline kind (every axis alike) at which the
+   baseline's nominal paper flight has the NNIT2FSMC's RMSE, or its total chattering (bisection
+   on log c over [1/16, 16], ``MATCH_STEPS`` flights per kind). Divided into the units of q'' by the
    nominal control gain b of the subsystem (x, y: 1; z: 1/m; phi, theta: d/Ix, d/Iy; psi: 1/Iz):
-       k = fuzzy_gain / input_scale * b    [1/s],   kd = k,   kp = lambda k,   ki = k lambda^2 / 4
+       k = c slope fuzzy_gain / input_scale * b    [1/s],   kd = k,   kp = lambda k,   ki = k lambda^2 / 4
    (the PID is then k (de + lambda e + lambda^2/4 int e): the NNIT2FSMC's surface plus an integral
    whose surface polynomial s^2 + lambda s + lambda^2/4 has a double root at lambda/2).
 2. Uncertainty bound of the campaign, per subsystem, in units of q'' (docs/BASELINES.md, section 2).
@@ -19,18 +27,24 @@ NNIT2FSMC gains, of the vehicle or of the campaign:
 5. se3: the same kp, kd, ki (multiplied by m or by Ix, Iy, Iz in the law) and clamps.
 
     .venv/bin/python bench/baseline_gains.py [--gains FILE] [--vehicle FILE] [--campaign SPEC]
+        [--matching slope|least-squares|rmse|chattering] [--out GAINS_FILE]
 
-prints the bound table and the three YAML sections of controller.yaml.
+prints the slopes, the bound table and the three YAML sections of controller.yaml (``--out``: a
+whole gains file with them, for ``bench/paper_tables.py --gains``).
 """
 from __future__ import annotations
 
 import argparse
+import copy
+import math
 import sys
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))     # paper_tables, for the rmse and chattering matchings
 import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
 from flight_stack.campaign.spec import load_spec  # noqa: E402
 from nnit2fsmc_controller.controller import AXES  # noqa: E402
@@ -46,25 +60,50 @@ GUST_SIGMAS = 2.0     #: the turbulence bound: mean + 2 sigma (95 % of the time 
 MARGIN = 0.1          #: eta = MARGIN * F
 
 
-def fuzzy_slope(gains) -> float:
-    """Least-squares slope of the IT2 map over its universe, per unit of fuzzy_gain / input_scale."""
+def unit_corrector(gains) -> IT2FuzzyCorrector:
+    """The IT2 term of the gains with input_scale 1 and output_gain 1."""
     n = gains['nnit2fsmc']
-    fuzzy = IT2FuzzyCorrector(input_scale=1.0, output_gain=1.0, lower_height=n['lower_height'],
-                              lower_half_width=n['lower_half_width'], type_reducer=n['type_reducer'])
+    return IT2FuzzyCorrector(input_scale=1.0, output_gain=1.0, lower_height=n['lower_height'],
+                             lower_half_width=n['lower_half_width'], type_reducer=n['type_reducer'])
+
+
+def small_signal_slope(lower_height: float, lower_half_width: float, type_reducer: str) -> float:
+    """-d(IT2 term)/dS at S = 0 per unit of fuzzy_gain / input_scale, from the membership functions
+    (step 1 of the module docstring). With lower half-width w < 0.5 only ZE's lower function fires
+    near 0: KM gives 1 / (2 H), Nie-Tan 1 / (1 + H). With w = 0.5 PM's lower function fires too
+    (H 2u): KM gives (H + 1 / H) / 2, Nie-Tan 1 (type 1 at H = 1: the line through the centres)."""
+    h = lower_height
+    if lower_half_width < 0.5:
+        return 1.0 / (2.0 * h) if type_reducer == 'km' else 1.0 / (1.0 + h)
+    return 0.5 * (h + 1.0 / h) if type_reducer == 'km' else 1.0
+
+
+def least_squares_slope(gains) -> float:
+    """Least-squares slope of the IT2 map over its universe, per unit of fuzzy_gain / input_scale."""
+    fuzzy = unit_corrector(gains)
     u = np.linspace(-1.0, 1.0, 4001)
     y = np.array([fuzzy(float(v)) for v in u])
     return float(-np.dot(u, y) / np.dot(u, u))
 
 
-def matched(gains, params, slope):
-    """{axis: (k, kp, kd, ki)} of step 1."""
+def fuzzy_slope(gains, matching: str = 'slope') -> float:
+    """The matched slope per unit of fuzzy_gain / input_scale: at S = 0 (``slope``, and the base of
+    ``rmse`` and ``chattering``) or least squares over the universe (``least-squares``)."""
+    if matching == 'least-squares':
+        return least_squares_slope(gains)
+    n = gains['nnit2fsmc']
+    return small_signal_slope(n['lower_height'], n['lower_half_width'], n['type_reducer'])
+
+
+def matched(gains, params, slope, scale: float = 1.0):
+    """{axis: (k, kp, kd, ki)} of step 1, k scaled by ``scale`` (c)."""
     b = {'x': 1.0, 'y': 1.0, 'z': 1.0 / params.m, 'phi': params.d / params.Ix, 'theta': params.d / params.Iy,
          'psi': 1.0 / params.Iz}
     out = {}
     for axis in AXES:
         a = gains['nnit2fsmc']['axes'][axis]
         lam = gains['common']['lambda'][axis]
-        k = slope * a['fuzzy_gain'] / a['input_scale'] * b[axis]
+        k = scale * slope * a['fuzzy_gain'] / a['input_scale'] * b[axis]
         out[axis] = (k, lam * k, k, k * lam * lam / 4.0)
     return out
 
@@ -104,27 +143,77 @@ def bounds(params, disturbances, spec):
     return r_min, r_max, {axis: (sum(terms[axis].values()) / divisor[axis], terms[axis]) for axis in AXES}
 
 
-def derive(gains, params, disturbances, spec):
+#: the gains section of each baseline kind
+SECTIONS = {'pid': 'pid', 'smc-integral': 'smc_integral', 'se3': 'se3'}
+
+
+def derive(gains, params, disturbances, spec, slope=None, scales=None):
     """(table rows, {'pid': ..., 'smc_integral': ..., 'se3': ...}): the gains sections of steps 1-5,
-    each {axis: {key: value}} as in controller.yaml."""
-    slope = fuzzy_slope(gains)
-    gains_of = matched(gains, params, slope)
+    each {axis: {key: value}} as in controller.yaml, at ``slope`` (default: the small-signal one)
+    with k scaled by ``scales[kind]`` (default 1). The table rows are those of the pid's scale."""
+    slope = fuzzy_slope(gains) if slope is None else slope
+    scales = {kind: 1.0 for kind in SECTIONS} if scales is None else scales
     r_min, r_max, bound = bounds(params, disturbances, spec)
     delta = max(1.0 / r_min - 1.0, 1.0 - 1.0 / r_max)
-    rows, sections = [], {'pid': {}, 'smc_integral': {}, 'se3': {}}
-    for axis in AXES:
-        k, kp, kd, ki = gains_of[axis]
-        f, terms = bound[axis]
-        switching = (1.0 + MARGIN) * f / r_min
-        hover = params.g if axis == 'z' else 0.0
-        limit = (switching + delta * hover) / ki
-        mu = gains['common']['lambda'][axis] ** 2 / 4.0
-        sections['pid'][axis] = {'kp': kp, 'ki': ki, 'kd': kd, 'integral_limit': limit}
-        sections['smc_integral'][axis] = {'slope': k, 'integral_gain': mu, 'switching_gain': switching,
-                                          'gain_uncertainty': delta, 'integral_limit': limit}
-        sections['se3'][axis] = {'k_error': kp, 'k_rate': kd, 'k_integral': ki, 'integral_limit': limit}
-        rows.append((axis, k, kp, kd, ki, terms, f, switching, hover, limit))
-    return (slope, r_min, r_max, delta, rows), sections
+    rows, sections = [], {section: {} for section in SECTIONS.values()}
+    for kind, section in SECTIONS.items():
+        gains_of = matched(gains, params, slope, scales[kind])
+        for axis in AXES:
+            k, kp, kd, ki = gains_of[axis]
+            f, terms = bound[axis]
+            switching = (1.0 + MARGIN) * f / r_min
+            hover = params.g if axis == 'z' else 0.0
+            limit = (switching + delta * hover) / ki
+            mu = gains['common']['lambda'][axis] ** 2 / 4.0
+            sections[section][axis] = {
+                'pid': {'kp': kp, 'ki': ki, 'kd': kd, 'integral_limit': limit},
+                'smc_integral': {'slope': k, 'integral_gain': mu, 'switching_gain': switching,
+                                 'gain_uncertainty': delta, 'integral_limit': limit},
+                'se3': {'k_error': kp, 'k_rate': kd, 'k_integral': ki, 'integral_limit': limit}}[section]
+            if kind == 'pid':
+                rows.append((axis, k, kp, kd, ki, terms, f, switching, hover, limit))
+    return (r_min, r_max, delta, rows), sections
+
+
+def with_sections(gains, sections) -> dict:
+    """The gains with the baseline sections replaced (rounded as printed, so that a flight here flies
+    what the printed YAML says)."""
+    out = copy.deepcopy(gains)
+    for section, per_axis in sections.items():
+        out[section] = {'axes': {axis: {key: float(yaml_float(value)) for key, value in values.items()}
+                                 for axis, values in per_axis.items()}}
+    return out
+
+
+def nominal_figure(kind: str, gains, metric: str) -> float:
+    """The nominal paper flight's RMSE [cm] (``metric`` 'rmse') or total chattering [N/s] ('chattering')
+    of ``kind`` with ``gains`` (bench/paper_tables.py's flight)."""
+    import paper_tables
+    outcome = paper_tables.fly(paper_tables.Flight(kind, 'paper'), gains)
+    if outcome.failure is not None:
+        return math.inf
+    return outcome.rmse_cm if metric == 'rmse' else outcome.total_chattering
+
+
+def matched_scale(kind, gains, params, disturbances, spec, slope, metric: str, target: float) -> tuple[float, float]:
+    """(c, figure): the scale c of ``kind``'s slope-matched gains at which its nominal ``metric`` equals
+    ``target``, by bisection on log c over [1/16, 16] (both figures fall as c grows: a stiffer loop
+    tracks closer and, against the section IV disturbances, moves its controls no more)."""
+    def figure(c):
+        scales = {name: c for name in SECTIONS}
+        return nominal_figure(kind, with_sections(gains, derive(gains, params, disturbances, spec, slope, scales)[1]),
+                              metric)
+    low, high = math.log(1.0 / 16.0), math.log(16.0)
+    value = math.nan
+    for _ in range(MATCH_STEPS):
+        middle = 0.5 * (low + high)
+        value = figure(math.exp(middle))
+        if (value > target) == (metric == 'rmse'):
+            low = middle          # too loose (rmse) / too quiet (chattering): stiffer
+        else:
+            high = middle
+    c = math.exp(0.5 * (low + high))
+    return c, figure(c)
 
 
 def yaml_float(value: float) -> str:
@@ -133,16 +222,40 @@ def yaml_float(value: float) -> str:
     return text if any(c in text for c in '.e') else text + '.0'
 
 
+MATCHINGS = ('slope', 'least-squares', 'rmse', 'chattering')
+MATCH_STEPS = 8      #: bisection steps of the rmse and chattering matchings: c to within a factor 256^(1/512) = 1.011
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('--gains', type=Path, default=None, help='NNIT2FSMC gains file (default: the packaged one)')
     parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle file (default: the packaged one)')
     parser.add_argument('--campaign', type=Path, default=ROOT / 'campaigns' / 'paper-robustness.yaml')
+    parser.add_argument('--matching', choices=MATCHINGS, default='slope',
+                        help='slope: at S = 0 (default); least-squares: over the universe; rmse / chattering: '
+                             'scaled until the nominal paper flight equals the NNIT2FSMC\'s (flies)')
+    parser.add_argument('--out', type=Path, default=None,
+                        help='also write a whole gains file (the --gains file with these baseline sections)')
     args = parser.parse_args(argv)
     params, disturbances = load_vehicle_file(args.vehicle)
-    (slope, r_min, r_max, delta, rows), sections = derive(load_gains(args.gains), params, disturbances,
-                                                          load_spec(args.campaign))
-    print(f'IT2 least-squares slope: {slope:.4f} x fuzzy_gain / input_scale')
+    gains, spec = load_gains(args.gains), load_spec(args.campaign)
+    n = gains['nnit2fsmc']
+    slope = fuzzy_slope(gains, args.matching)
+    print(f'IT2 small-signal slope at S = 0 (lower_height {n["lower_height"]}, lower_half_width '
+          f'{n["lower_half_width"]}, {n["type_reducer"]}): '
+          f'{small_signal_slope(n["lower_height"], n["lower_half_width"], n["type_reducer"]):.4f} x fuzzy_gain / '
+          f'input_scale; least-squares slope over the universe: {least_squares_slope(gains):.4f}')
+    print(f'matching: {args.matching}, slope {slope:.4f}')
+    scales = {kind: 1.0 for kind in SECTIONS}
+    if args.matching in ('rmse', 'chattering'):
+        target = nominal_figure('nnit2fsmc', gains, args.matching)
+        unit = 'cm' if args.matching == 'rmse' else 'N/s'
+        print(f'target: nnit2fsmc nominal paper flight {args.matching} {target:.4g} {unit}')
+        for kind in SECTIONS:
+            scales[kind], reached = matched_scale(kind, gains, params, disturbances, spec, slope, args.matching,
+                                                  target)
+            print(f'  {kind}: c = {scales[kind]:.4g} -> {args.matching} {reached:.4g} {unit}')
+    (r_min, r_max, delta, rows), sections = derive(gains, params, disturbances, spec, slope, scales)
     print(f'gain ratio r = true/nominal in [{r_min:.4f}, {r_max:.4f}], gain_uncertainty = {delta:.4f}\n')
     print('| axis | k [1/s] | kp | kd | ki | model error terms [N or N m] | F [q\'\' units] | switching_gain | '
           'u_eq at hover | integral_limit |')
@@ -156,6 +269,9 @@ def main(argv=None) -> int:
         for axis, values in per_axis.items():
             text = ', '.join(f'{key}: {yaml_float(value)}' for key, value in values.items())
             print(f'        {axis + ":":6} {{{text}}}')
+    if args.out is not None:
+        args.out.write_text(yaml.safe_dump(with_sections(gains, sections), sort_keys=False))
+        print(f'\nwrote {args.out}')
     return 0
 
 

@@ -4,10 +4,12 @@
     .venv/bin/python bench/paper_tables.py                       # every experiment, every controller
     .venv/bin/python bench/paper_tables.py --experiments delay --controllers nnit2fsmc,pid
     .venv/bin/python bench/paper_tables.py --duration 20 --jobs 2 --out tables.md
+    .venv/bin/python bench/paper_tables.py --no-filters          # every controller without the measurement stage
+    .venv/bin/python bench/paper_tables.py --gains FILE          # e.g. baselines matched at equal nominal RMSE
 
 Every flight is an embedded flight (:func:`flight_stack.embedded.fly_embedded`, the code path of
 ``run_stack.py --backend embedded``) of the nominal vehicle with the section IV disturbances, the
-packaged gains file, physics at 1 kHz; its figures are those of the review
+packaged gains file (every controller through its measurement stage), physics at 1 kHz; its figures are those of the review
 (:func:`quad_msgs_bridge.review.metrics.flight_metrics`) after the settling time (5 s, or half a
 flight shorter than 10 s). A flight fails (and its row says so) when the vehicle goes non-finite,
 flips, crashes or strays more than 1 m from the reference after settling (``api.fly``'s default).
@@ -25,8 +27,9 @@ Experiments (``--experiments``, default all; ``--scenarios`` applies to each cho
   N m/s] and their sum, share of settled steps with a rotor at a limit.
 * ``delay``: the delay margin, by bisection on the transport delay in whole control steps over
   0..100 ms; and the flight with 20 ms beside the flight without delay.
-  **Criterion.** A delay is *unstable* when the flight fails (divergence: see above), or when the
-  attitude chattering TV(U2) + TV(U3) over the last 20 s of the flight (the settled part if that is
+  **Criterion.** A delay is *unstable* when the flight fails (divergence: see above), or when its
+  position RMSE exceeds the absolute yardstick of 2 cm (``ABSOLUTE_RMSE_CM``: a controller whose
+  error is already large is not called stable), or when the attitude chattering TV(U2) + TV(U3) over the last 20 s of the flight (the settled part if that is
   shorter) exceeds 10 times its value without delay (a limit cycle), or when the position RMSE
   exceeds 10 times its value without delay. The margin is the smallest unstable delay; the
   bisection assumes that every longer delay is unstable too. Why these numbers: a limit cycle of
@@ -50,6 +53,7 @@ with ``--out FILE`` to that file too.
 from __future__ import annotations
 
 import argparse
+import copy
 import math
 import multiprocessing
 import sys
@@ -60,24 +64,26 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
 from flight_stack.closed_loop import FailureRules  # noqa: E402
+from flight_stack import embedded  # noqa: E402
 from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
 from nnit2fsmc_controller import factory  # noqa: E402
 from nnit2fsmc_controller import trajectory as trajectories  # noqa: E402
 from quad_msgs_bridge.review.metrics import default_settle_time, flight_metrics, has_fuzzy_term  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
-from quad_sim.perturbations.actuation import TransportDelay  # noqa: E402
+from quad_sim.perturbations.actuation import MotorLag, TransportDelay  # noqa: E402
 from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise  # noqa: E402
 from quad_sim.perturbations.streams import flight_streams  # noqa: E402
+from quad_sim.simulator import Simulator  # noqa: E402
 
 EXPERIMENTS = ('nominal', 'delay', 'rate', 'noise')
 DEFAULT_SCENARIOS = {'nominal': ('paper',), 'delay': ('paper',), 'rate': ('paper',), 'noise': ('paper', 'lemniscate')}
-PHYSICS_RATE = 1000.0        #: [Hz]
 MAX_ERROR = 1.0              #: [m] position error after settling beyond which a flight has failed
 CONTROLS = ('U1', 'U2', 'U3', 'U4')
 MAX_DELAY = 0.100            #: [s] the delay bisection's range is 0..MAX_DELAY
 DELAY_ROW = 0.020            #: [s] the delay of the side-by-side row
 TAIL = 20.0                  #: [s] the delay criterion's chattering window: the end of the flight
 INSTABILITY_FACTOR = 10.0    #: growth of TV(U2) + TV(U3) or of the RMSE that counts as unstable
+ABSOLUTE_RMSE_CM = 2.0       #: [cm] the absolute yardstick: a flight with a larger position RMSE is not stable
 DEFAULT_RATES = (1000.0, 250.0, 100.0)   #: [Hz]
 NOISE = SensorErrors(position=0.01, velocity=0.02, attitude=0.01, body_rate=0.02)   #: the example campaign's
 NOISE_SEED = 1
@@ -94,6 +100,12 @@ class Flight:
     delay_steps: int = 0               #: transport delay [control steps]
     control_rate: float | None = None  #: [Hz] None: the gains file's
     noise: bool = False                #: the example campaign's sensor noise
+    delay_substeps: int = 0            #: a further delay of this many physics steps (a fraction of a control step)
+    physics_rate: float = 1000.0       #: [Hz] RK4 rate (a whole multiple of the control rate)
+    motor_lag: float = 0.0             #: [s] first-order motor time constant (0: ideal rotors)
+    thrust_factor: float = 1.0         #: every rotor gives this times its command: a loop-gain change
+    filters: bool = True               #: False: the measurement stage off (common.*_filter_hz 0) for every kind
+    gains_file: str | None = None      #: a gains file instead of the packaged one
 
 
 @dataclass(frozen=True)
@@ -123,9 +135,13 @@ class Outcome:
 FAITHFUL = ':faithful'   #: controller suffix: the paper-faithful settings
 
 
-def gains_for(control_rate: float | None, faithful: bool = False) -> dict:
-    """The packaged gains (with factory.PAPER_FAITHFUL if ``faithful``), at ``control_rate`` [Hz] if given."""
-    gains = factory.load_gains()
+def gains_for(control_rate: float | None, faithful: bool = False, gains: dict | None = None,
+              filters: bool = True) -> dict:
+    """The packaged gains, or ``gains`` (with factory.PAPER_FAITHFUL if ``faithful``; with the measurement
+    stage off if not ``filters``), at ``control_rate`` [Hz] if given."""
+    gains = copy.deepcopy(gains) if gains is not None else factory.load_gains()
+    if not filters:
+        gains['common'] = {**gains['common'], 'measurement_filter_hz': 0.0, 'velocity_filter_hz': 0.0}
     if faithful:
         gains = factory.unflatten_gains({**factory.flatten_gains(gains), **factory.PAPER_FAITHFUL})
     if control_rate is not None:
@@ -138,11 +154,40 @@ def kind_of(controller: str) -> str:
     return controller.removesuffix(FAITHFUL)
 
 
-def fly(flight: Flight) -> Outcome:
-    """Fly ``flight`` on the embedded backend and take its figures."""
+class FractionalDelaySimulator(Simulator):
+    """A simulator whose thrust commands take effect ``lead`` physics steps into the next control step
+    (:meth:`advance` integrates the first ``lead`` physics steps with the previous command): with the
+    transport delay of whole control steps, a delay resolved to one physics step."""
+
+    lead = 0
+
+    def set_forces(self, forces) -> bool:
+        self._previous = self.forces
+        return super().set_forces(forces)
+
+    def advance(self, steps: int = 1) -> None:
+        lead = min(self.lead, steps)
+        if lead and hasattr(self, '_previous'):
+            commanded, self.forces = self.forces, self._previous
+            super().advance(lead)
+            self.forces = commanded
+            steps -= lead
+        super().advance(steps)
+
+
+#: Flight fields that every flight of a run takes (main's --gains and --no-filters)
+OVERRIDES: dict = {}
+
+
+def fly(flight: Flight, gains: dict | None = None) -> Outcome:
+    """Fly ``flight`` (with OVERRIDES) on the embedded backend and take its figures; ``gains``: instead of
+    the packaged gains (or of ``flight.gains_file``)."""
+    flight = replace(flight, **OVERRIDES)
     params, disturbances = load_vehicle_file()
     kind, faithful = kind_of(flight.controller), flight.controller.endswith(FAITHFUL)
-    gains = gains_for(flight.control_rate, faithful)
+    if gains is None and flight.gains_file is not None:
+        gains = factory.load_gains(flight.gains_file)
+    gains = gains_for(flight.control_rate, faithful, gains, flight.filters)
     control_dt = factory.control_period(gains)
     path = trajectories.make_scenario(flight.scenario, flight.duration)
     duration = path.duration if flight.duration is None else flight.duration
@@ -151,10 +196,21 @@ def fly(flight: Flight) -> Outcome:
     if flight.noise:
         streams = flight_streams(NOISE_SEED, 0)
         noise = SensorNoise(NOISE, SensorErrors(), streams.sensor_noise, streams.sensor_bias)
-    perturbations = Perturbations(sensor_noise=noise,
-                                  delay=TransportDelay(flight.delay_steps) if flight.delay_steps else None)
-    result = fly_embedded(kind, path, params, disturbances, gains, duration, PHYSICS_RATE,
-                          perturbations=perturbations, rules=FailureRules(settle, MAX_ERROR))
+    true_vehicle = (replace(params,   # thrust and reaction torque alike: every control times thrust_factor
+                            rotor_thrust_factors=tuple(f * flight.thrust_factor for f in params.rotor_thrust_factors),
+                            rotor_drag_factors=tuple(g * flight.thrust_factor for g in params.rotor_drag_factors))
+                    if flight.thrust_factor != 1.0 else None)
+    perturbations = Perturbations(sensor_noise=noise, true_vehicle=true_vehicle,
+                                  delay=TransportDelay(flight.delay_steps) if flight.delay_steps else None,
+                                  motor_lag=(MotorLag(flight.motor_lag, 1.0 / flight.physics_rate)
+                                             if flight.motor_lag > 0.0 else None))
+    FractionalDelaySimulator.lead = flight.delay_substeps
+    embedded.Simulator = FractionalDelaySimulator if flight.delay_substeps else Simulator
+    try:
+        result = fly_embedded(kind, path, params, disturbances, gains, duration, flight.physics_rate,
+                              perturbations=perturbations, rules=FailureRules(settle, MAX_ERROR))
+    finally:
+        embedded.Simulator = Simulator
     failed = result.failure is not None
     figures = dict(f_min=params.F_min, f_max=params.F_max, fuzzy_term=has_fuzzy_term(kind),
                    ended_early=failed)
@@ -163,18 +219,22 @@ def fly(flight: Flight) -> Outcome:
     return Outcome(metrics, tail['chattering'], result.failure, result.failure_time_s)
 
 
-def instability(outcome: Outcome, undelayed: Outcome) -> str | None:
+def instability(outcome: Outcome, undelayed: Outcome, relative_rmse: bool = True) -> str | None:
     """Why ``outcome`` is unstable by the delay criterion of the module docstring (failed, or a 10x
     growth of the attitude chattering over the last 20 s or of the RMSE against the flight without
-    delay, ``undelayed``), or None when it is not."""
+    delay, ``undelayed``, or an RMSE above the absolute yardstick), or None when it is not.
+    ``relative_rmse`` False leaves the 10x RMSE growth out (the gain margin: a thrust factor is also a
+    model error of the hover feed-forward, whose transient is not an instability)."""
     if outcome.failure is not None:
         return outcome.failure
-    for name, delayed, without in (('TV(U2)+TV(U3)', outcome.attitude_tail_chattering,
-                                    undelayed.attitude_tail_chattering),
-                                   ('RMSE', outcome.rmse_cm, undelayed.rmse_cm)):
+    growths = (('TV(U2)+TV(U3)', outcome.attitude_tail_chattering, undelayed.attitude_tail_chattering),
+               ('RMSE', outcome.rmse_cm, undelayed.rmse_cm))
+    for name, delayed, without in growths[:2 if relative_rmse else 1]:
         if not delayed <= INSTABILITY_FACTOR * without:      # (NaN, of a failed flight, is unstable)
             return (f'{name} x{delayed / without:.3g}' if without > 0.0
                     else f'{name} {delayed:.3g}, no delay {without:.3g}')
+    if not outcome.rmse_cm <= ABSOLUTE_RMSE_CM:
+        return f'RMSE {outcome.rmse_cm:.3g} cm > {ABSOLUTE_RMSE_CM:g} cm'
     return None
 
 
@@ -186,10 +246,15 @@ def unstable(outcome: Outcome, undelayed: Outcome) -> bool:
 class DelayMargin:
     """The result of :func:`delay_margin`."""
 
-    control_dt: float        #: [s]
-    margin_steps: int | None  #: smallest unstable delay [control steps]; None: none up to max_steps
+    control_dt: float        #: [s] the resolution of the search: one physics step (a control step at equal rates)
+    margin_steps: int | None  #: smallest unstable delay [steps of control_dt]; None: none up to max_steps
     max_steps: int           #: the range searched, 0..max_steps
     tried: dict              #: delay [steps] -> why it is unstable (:func:`instability`), None if stable
+
+    @property
+    def seconds(self) -> float:
+        """The margin [s] (inf: none found up to max_steps)."""
+        return math.inf if self.margin_steps is None else self.margin_steps * self.control_dt
 
     @property
     def text(self) -> str:
@@ -199,20 +264,28 @@ class DelayMargin:
         return f'{1e3 * self.margin_steps * self.control_dt:g} ms ({self.tried[self.margin_steps]})'
 
 
+def delayed(flight: Flight, physics_steps: int) -> Flight:
+    """``flight`` with a transport delay of ``physics_steps`` physics steps: whole control steps, and the
+    rest as a fractional delay (:class:`FractionalDelaySimulator`)."""
+    per_control = int(round(flight.physics_rate * factory.control_period(gains_for(flight.control_rate))))
+    return replace(flight, delay_steps=physics_steps // per_control, delay_substeps=physics_steps % per_control)
+
+
 def delay_margin(flight: Flight, undelayed: Outcome | None = None, max_delay: float = MAX_DELAY) -> DelayMargin:
-    """The smallest transport delay (whole control steps in 0..``max_delay`` [s]) at which ``flight``
-    is :func:`unstable`, by bisection; ``undelayed`` is the flight without delay (flown if None)."""
-    control_dt = factory.control_period(gains_for(flight.control_rate))
-    undelayed = undelayed if undelayed is not None else fly(replace(flight, delay_steps=0))
-    max_steps = int(round(max_delay / control_dt))
+    """The smallest transport delay (whole physics steps in 0..``max_delay`` [s]: control steps when the
+    physics runs at the control rate) at which ``flight`` is :func:`unstable`, by bisection;
+    ``undelayed`` is the flight without delay (flown if None)."""
+    step = 1.0 / flight.physics_rate
+    undelayed = undelayed if undelayed is not None else fly(replace(flight, delay_steps=0, delay_substeps=0))
+    max_steps = int(round(max_delay / step))
     tried = {}
 
     def is_unstable(steps: int) -> bool:
-        tried[steps] = instability(fly(replace(flight, delay_steps=steps)), undelayed)
+        tried[steps] = instability(fly(delayed(flight, steps)), undelayed)
         return tried[steps] is not None
 
     if not is_unstable(max_steps):
-        return DelayMargin(control_dt, None, max_steps, tried)
+        return DelayMargin(step, None, max_steps, tried)
     stable, failing = 0, max_steps          # invariant: stable is stable, failing is unstable
     while failing - stable > 1:
         middle = (stable + failing) // 2
@@ -220,7 +293,7 @@ def delay_margin(flight: Flight, undelayed: Outcome | None = None, max_delay: fl
             failing = middle
         else:
             stable = middle
-    return DelayMargin(control_dt, failing, max_steps, tried)
+    return DelayMargin(step, failing, max_steps, tried)
 
 
 def monotone(instabilities: dict) -> bool:
@@ -296,8 +369,8 @@ def delay_table(controllers, scenario, duration, flown, margins) -> list[str]:
         ['controller', 'delay margin', 'RMSE [cm] no delay', f'RMSE [cm] {ms}', 'TV(U2) [N/s] no delay',
          f'TV(U2) {ms}', 'TV(U3) [N/s] no delay', f'TV(U3) {ms}', f'note ({ms})'], rows) + [
         '', f'Delay margin: smallest delay (bisection over 0..{1e3 * MAX_DELAY:g} ms in control steps) at which the '
-        f'flight fails or TV(U2) + TV(U3) over its last {TAIL:g} s or its RMSE exceeds {INSTABILITY_FACTOR:g}x '
-        f'the no-delay value (bench/paper_tables.py); "not monotone": a flight flown here with a longer delay than '
+        f'flight fails, its RMSE exceeds {ABSOLUTE_RMSE_CM:g} cm, or TV(U2) + TV(U3) over its last {TAIL:g} s or its '
+        f'RMSE exceeds {INSTABILITY_FACTOR:g}x the no-delay value (bench/paper_tables.py); "not monotone": a flight flown here with a longer delay than '
         'an unstable one was stable, so the bisection may have missed a smaller unstable delay. TV columns: '
         f'the last {TAIL:g} s of the flight (its settled part if that is shorter).']
 
@@ -388,8 +461,17 @@ def main(argv=None) -> int:
     parser.add_argument('--duration', type=float, help='[s] every flight this long (default: the scenario length)')
     parser.add_argument('--rates', default=','.join(f'{r:g}' for r in DEFAULT_RATES), help='[Hz] control rates')
     parser.add_argument('--jobs', type=int, default=1, help='flights at a time (process pool; default 1)')
+    parser.add_argument('--gains', help='gains file for every flight (default: the packaged one), e.g. one of '
+                                        'bench/baseline_gains.py --matching rmse --out FILE')
+    parser.add_argument('--no-filters', action='store_true',
+                        help='every controller without its measurement stage (common.*_filter_hz 0)')
     parser.add_argument('--out', type=Path, help='also write the tables to this file')
     args = parser.parse_args(argv)
+    OVERRIDES.clear()
+    if args.gains:
+        OVERRIDES['gains_file'] = args.gains
+    if args.no_filters:
+        OVERRIDES['filters'] = False
     experiments = names(args.experiments)
     unknown = [e for e in experiments if e not in EXPERIMENTS]
     controllers = names(args.controllers) if args.controllers else list(factory.CONTROLLERS)

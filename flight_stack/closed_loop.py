@@ -3,8 +3,10 @@
 Per control step, in this order (the order of the ROS lockstep flight):
 
 1. the simulator's true state at sim time t is measured: :class:`SensorNoise` adds noise and bias
-   (if any), then ``observe`` turns the measurement into what the controller reads (the embedded
-   single flight passes it through an odometry message and back, as the ROS flight does);
+   (if any), then ``observe`` turns the measurement into what the controller node receives (the
+   embedded single flight passes it through an odometry message and back, as the ROS flight does),
+   and the measurement stage (:class:`MeasurementStage`, the same for every controller kind, as in
+   the ROS controller node) filters it into what the controller reads;
 2. the controller answers it with the reference for the same instant t;
 3. the forces go through the transport delay (if any) to the simulator, which integrates until
    the next control step (motor lag and wind act at every physics step, inside the simulator);
@@ -29,6 +31,7 @@ import numpy as np
 from numba import njit
 
 from nnit2fsmc_controller.controller import CascadedController, ControlOutput
+from nnit2fsmc_controller.estimation import MeasurementStage
 from quad_msgs_bridge.numeric import namespace_for, select
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.review.metrics import StatisticsAccumulator
@@ -88,7 +91,8 @@ class LoopStep(NamedTuple):
 
     time: float                      #: [s] sim time of the measurement
     truth: list                      #: true 12-state at that time
-    measured: list                   #: the 12-state the controller read
+    measured: list                   #: the measured 12-state (the odometry's), before the measurement stage
+    seen: list                       #: the 12-state the controller read (after the measurement stage)
     observation: object              #: what ``observe`` returned beside the state (an odometry sample, or None)
     reference: ReferenceSample       #: the reference the controller answered
     output: ControlOutput            #: the controller's answer
@@ -105,6 +109,8 @@ class ClosedLoop:
 
     ``reference(t)`` gives the reference at sim time t [s]; ``observe(t, state)`` returns
     (state the controller reads, observation) for a measured state (default: the state itself).
+    ``measurement``: the measurement stage every controller kind reads through
+    (``factory.build_measurement_stage(gains)``; None: the measurement as it is).
     ``substeps`` physics steps are integrated per control step. With ``statistics`` the loop sums
     each vehicle's tracking statistics as it goes (:attr:`statistics`; a batch keeps no record).
     """
@@ -112,8 +118,10 @@ class ClosedLoop:
     def __init__(self, controller: CascadedController, simulator: Simulator,
                  reference: Callable[[float], ReferenceSample], substeps: int, rules: FailureRules,
                  sensor_noise: SensorNoise | None = None, delay: TransportDelay | None = None,
-                 observe: Callable | None = None, statistics: bool = False):
+                 observe: Callable | None = None, statistics: bool = False,
+                 measurement: MeasurementStage | None = None):
         self.controller = controller
+        self.measurement = measurement
         self.simulator = simulator
         self.reference = reference
         self.substeps = substeps
@@ -146,12 +154,13 @@ class ClosedLoop:
         truth = sim.state
         measured = truth if self.sensor_noise is None else self.sensor_noise.measure(truth)
         with self._quiet():
-            seen, observation = (measured, None) if self.observe is None else self.observe(t, measured)
-        xp = namespace_for(seen[0])
-        if not xp.all_finite(seen):
-            unreadable = xp.where(xp.finite_each(seen), False, True)
+            received, observation = (measured, None) if self.observe is None else self.observe(t, measured)
+        xp = namespace_for(received[0])
+        if not xp.all_finite(received):
+            unreadable = xp.where(xp.finite_each(received), False, True)
             self._fail(unreadable, 0, t)
-            seen = [xp.where(unreadable, 0.0, value) for value in seen]
+            received = [xp.where(unreadable, 0.0, value) for value in received]
+        seen = received if self.measurement is None else self.measurement(received)
         reference = self.reference(t)
         out = self.controller.update(t, seen, reference)
         applied = out.forces if self.delay is None else self.delay(out.forces)
@@ -161,7 +170,7 @@ class ClosedLoop:
                                 out.controls, self.flying)
         sim.advance(self.substeps)
         self._check(sim.time, truth, reference)
-        return LoopStep(t, truth, seen, observation, reference, out, applied)
+        return LoopStep(t, truth, received, seen, observation, reference, out, applied)
 
     def _fail(self, which, code, t: float) -> None:
         """Fail the vehicles ``which`` (a bool or bool array) that still fly, with failure ``code`` at t [s]."""

@@ -29,7 +29,7 @@ from quad_sim.perturbations.actuation import MotorLag, TransportDelay
 from quad_sim.perturbations.sensor_noise import SensorNoise
 from quad_sim.perturbations.wind import Wind
 from quad_sim.simulator import Simulator
-from nnit2fsmc_controller.factory import build_controller
+from nnit2fsmc_controller.factory import build_controller, build_measurement_stage
 
 from .closed_loop import FAILURES, ClosedLoop, FailureRules
 
@@ -107,7 +107,8 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     simulator = Simulator(model, 1.0 / physics_rate, trajectory.initial_state,
                           motor_lag=perturbations.motor_lag, wind=perturbations.wind)
     loop = ClosedLoop(controller, simulator, setpoints.sample, substeps, rules,
-                      sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, observe=through_odometry)
+                      sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, observe=through_odometry,
+                      measurement=build_measurement_stage(gains))
     recorder = FlightRecorder()
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
@@ -179,7 +180,7 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
     start = [np.array(values) for values in zip(*(trajectory.initial_state for trajectory in trajectories))]
     simulator = Simulator(QuadrotorModel(params, disturbances), 1.0 / physics_rate, start)
     loop = ClosedLoop(controller, simulator, lambda t: _stacked([path.sample(t) for path in paths]), substeps,
-                      rules, observe=through_odometry)
+                      rules, observe=through_odometry, measurement=build_measurement_stage(gains))
     slopes = controller.surface_slopes()
     recorders = [FlightRecorder() for _ in trajectories]
     steps = int(round(duration / controller.dt))

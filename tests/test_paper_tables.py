@@ -151,3 +151,90 @@ def test_delay_margin_bisection_brackets_the_margin():
 def test_monotone_delay_verdicts():
     assert paper_tables.monotone({0: None, 5: None, 7: 'RMSE x11', 100: 'crashed'})
     assert not paper_tables.monotone({0: None, 18: 'RMSE x10.9', 20: None, 100: 'crashed'})
+
+
+def test_the_absolute_yardstick_makes_a_large_error_unstable_whatever_the_flight_without_delay():
+    loose = outcome(1.5, 1.0)          # 1.5 cm without delay
+    assert paper_tables.instability(outcome(2.5, 1.0), loose) == 'RMSE 2.5 cm > 2 cm'
+    assert paper_tables.instability(outcome(1.9, 1.0), loose) is None
+
+
+def _margins():
+    import importlib.util
+    bench = SCRIPT.parent
+    sys.path.insert(0, str(bench))
+    spec = importlib.util.spec_from_file_location('margins', bench / 'margins.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize('kp, kd, tau', [(262.7, 32.83, 0.0), (12.5, 4.167, 0.0), (217.7, 27.21, 0.005)])
+def test_the_linearised_delay_margin_of_a_pd_double_integrator_is_the_closed_form(kp, kd, tau):
+    """L(s) = (kd s + kp) e^(-s tau) / s^2: |L(j w_c)| = 1 at w_c^2 = (kd^2 + sqrt(kd^4 + 4 kp^2)) / 2, phase
+    margin atan(kd w_c / kp) - w_c tau, delay margin atan(kd w_c / kp) / w_c - tau; the phase reaches -180
+    degrees only through the delay, at w_180 with kd w_180 / kp = tan(w_180 tau)."""
+    import cmath
+    margins = _margins().loop_margins(lambda s: (kd * s + kp) * cmath.exp(-s * tau) / (s * s))
+    w_c = math.sqrt((kd ** 2 + math.sqrt(kd ** 4 + 4 * kp ** 2)) / 2)
+    assert margins['crossovers'] == [pytest.approx(w_c, rel=1e-9)]
+    assert margins['phase_margin'] == pytest.approx(math.atan(kd * w_c / kp) - w_c * tau, rel=1e-9)
+    assert margins['delay_margin'] == pytest.approx(math.atan(kd * w_c / kp) / w_c - tau, rel=1e-9)
+    if tau == 0.0:
+        assert margins['gain_margin'] == math.inf
+    else:
+        w = margins['phase_crossover']
+        assert math.atan(kd * w / kp) == pytest.approx(w * tau, rel=1e-7)
+        assert margins['gain_margin'] == pytest.approx(w * w / math.hypot(kd * w, kp), rel=1e-7)
+
+
+def test_a_fractional_delay_holds_the_previous_command_for_its_physics_steps():
+    """FractionalDelaySimulator with lead 1 of 4 physics steps: the first physics step of a control step
+    integrates the previous command, the other three the new one."""
+    from quad_sim.model import QuadrotorModel
+    from quad_sim.simulator import Simulator
+    params, disturbances = load_vehicle_file()
+    model = QuadrotorModel(params, disturbances.switched(False))
+    start = [0.0, 0.0, 1.0] + [0.0] * 9
+    split = paper_tables.FractionalDelaySimulator(model, 0.00025, start)
+    split.lead = 1
+    plain = Simulator(model, 0.00025, start)
+    hover, more = (params.hover_force,) * 4, (params.hover_force * 1.2,) * 4
+    for forces in (hover, more):
+        split.set_forces(forces)
+        split.advance(4)
+        plain.advance(1)           # the command before (at first the simulator's initial one)
+        plain.set_forces(forces)
+        plain.advance(3)
+    assert split.state == plain.state and split.forces == more
+    undelayed = Simulator(model, 0.00025, start)
+    for forces in (hover, more):
+        undelayed.set_forces(forces)
+        undelayed.advance(4)
+    assert split.state[2] != undelayed.state[2]     # the quarter-step delay is felt
+
+
+def test_a_flight_with_motor_lag_a_thrust_factor_and_no_filters_is_the_direct_flight():
+    """paper_tables.fly's motor lag, thrust factor (every rotor's thrust and torque) and measurement stage
+    off are what a direct embedded flight with those perturbations and gains flies."""
+    import dataclasses
+    from quad_sim.perturbations.actuation import MotorLag
+    params, disturbances = load_vehicle_file()
+    outcome = paper_tables.fly(paper_tables.Flight('pid', 'paper', DURATION, motor_lag=0.03, thrust_factor=1.2,
+                                                   filters=False))
+    gains = load_gains()
+    gains['common'].update(measurement_filter_hz=0.0, velocity_filter_hz=0.0)
+    true = dataclasses.replace(params, rotor_thrust_factors=(1.2,) * 4, rotor_drag_factors=(1.2,) * 4)
+    record = fly_embedded('pid', make_scenario('paper', DURATION), params, disturbances, gains, DURATION, 1000.0,
+                          perturbations=Perturbations(true_vehicle=true, motor_lag=MotorLag(0.03, 1e-3))).record
+    direct = flight_metrics(record, SETTLE, params.F_min, params.F_max)
+    assert outcome.rmse_cm == pytest.approx(100.0 * direct['rmse_position_m'], rel=1e-12)
+    assert outcome.rmse_cm != pytest.approx(paper_tables.fly(paper_tables.Flight('pid', 'paper', DURATION)).rmse_cm,
+                                            rel=1e-3)
+
+
+def test_the_gain_criterion_leaves_the_relative_rmse_out():
+    assert paper_tables.instability(outcome(0.5, 1.0), outcome(0.02, 1.0)) == 'RMSE x25'
+    assert paper_tables.instability(outcome(0.5, 1.0), outcome(0.02, 1.0), relative_rmse=False) is None
+    assert paper_tables.instability(outcome(0.5, 12.0), outcome(0.02, 1.0), relative_rmse=False) == 'TV(U2)+TV(U3) x12'
+    assert paper_tables.instability(outcome(2.5, 1.0), outcome(0.02, 1.0), relative_rmse=False) == 'RMSE 2.5 cm > 2 cm'

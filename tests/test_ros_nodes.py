@@ -472,8 +472,8 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
                      {'scenario': 'hover', 'start_time': 0.0, 'use_sim_time': True}),
         # the surface is checked against the raw odometry: no measurement filter in between
         node_process('controller', 'nnit2fsmc_controller.controller_node', namespace,
-                     {'use_sim_time': True, 'nnit2fsmc.measurement_filter_hz': 0.0,
-                      'nnit2fsmc.velocity_filter_hz': 0.0}),
+                     {'use_sim_time': True, 'common.measurement_filter_hz': 0.0,
+                      'common.velocity_filter_hz': 0.0}),
         node_process('sim', 'quad_sim.sim_node', namespace,
                      {'duration': 3.0, 'initial_state': start, 'wait_for_subscribers': 2}),
     ]

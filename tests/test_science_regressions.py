@@ -13,8 +13,8 @@ import pytest
 
 from flight_stack.closed_loop import FailureRules
 from flight_stack.embedded import Perturbations, fly_embedded
-from nnit2fsmc_controller.factory import (ABLATIONS, CONTROLLERS, PAPER_FAITHFUL, build_controller, flatten_gains,
-                                          load_gains, unflatten_gains)
+from nnit2fsmc_controller.factory import (ABLATIONS, CONTROLLERS, PAPER_FAITHFUL, build_controller,
+                                          build_measurement_stage, flatten_gains, load_gains, unflatten_gains)
 from nnit2fsmc_controller.estimation import VelocityFilter
 from nnit2fsmc_controller.it2_fuzzy import CENTRES, CONSEQUENTS, LABELS, RULES
 from nnit2fsmc_controller.neural_network import EquivalentControlNetwork
@@ -133,8 +133,7 @@ def weights(network):
 def test_below_the_takeoff_height_only_the_z_network_learns(batch):
     """takeoff_height: on the ground the x, y and attitude networks hold and the desired tilt is 0; z learns
     (it lifts the vehicle)."""
-    gains = unflatten_gains({**flatten_gains(load_gains()), 'nnit2fsmc.takeoff_height': 0.05,
-                             'nnit2fsmc.measurement_filter_hz': 0.0})
+    gains = unflatten_gains({**flatten_gains(load_gains()), 'nnit2fsmc.takeoff_height': 0.05})
     controller = build_controller('nnit2fsmc', PARAMS, gains, batch=batch)
     start = {axis: weights(law.network).copy() for axis, law in controller.laws.items()}
     reference = Helix().sample(0.5)           # 0.5 s into the helix (its height: 5 cm)
@@ -161,8 +160,8 @@ def test_below_the_takeoff_height_only_the_z_network_learns(batch):
 def test_the_takeoff_height_and_the_velocity_filter_are_off_in_the_paper_settings():
     gains = unflatten_gains({**flatten_gains(load_gains()), **PAPER_FAITHFUL})
     controller = build_controller('nnit2fsmc', PARAMS, gains)
-    assert controller.takeoff_height == 0.0 and controller.velocity_filter is None
-    assert controller.measurement_filter is None
+    assert controller.takeoff_height == 0.0
+    assert build_measurement_stage(gains).filters == ()
 
 
 def test_velocity_filter_is_a_first_order_low_pass_of_the_velocities_only():
@@ -334,3 +333,159 @@ def test_sensor_noise_does_not_blow_up_the_total_variation():
     _, metrics = fly(noise=SensorErrors(position=0.01, attitude=0.01))
     assert sum(metrics['chattering'].values()) < 100.0
     assert metrics['rmse_position_m'] < 0.01
+
+
+class _Spy:
+    """A controller that records every state it is given, and otherwise is the controller it wraps."""
+
+    def __init__(self, controller):
+        self.wrapped, self.seen = controller, []
+
+    def update(self, t, state, reference):
+        self.seen.append([float(v) for v in state])
+        return self.wrapped.update(t, state, reference)
+
+    def __getattr__(self, name):
+        return getattr(self.wrapped, name)
+
+
+@pytest.mark.parametrize('kind', CONTROLLERS)
+def test_every_kind_reads_through_the_same_measurement_stage(kind, monkeypatch):
+    """The closed loop passes the noisy measurement through the gains' measurement stage, whatever the
+    controller: the controller reads exactly the stage's output for the odometry it received (replayed
+    here through a fresh stage), not the raw values."""
+    import flight_stack.embedded as embedded
+    spies, steps = [], []
+
+    def spied(*args, **kwargs):
+        spies.append(_Spy(build_controller(*args, **kwargs)))
+        return spies[-1]
+
+    class RecordingLoop(embedded.ClosedLoop):
+        def step(self):
+            steps.append(super().step())
+            return steps[-1]
+
+    monkeypatch.setattr(embedded, 'build_controller', spied)
+    monkeypatch.setattr(embedded, 'ClosedLoop', RecordingLoop)
+    gains = load_gains()
+    assert gains['common']['measurement_filter_hz'] > 0.0 and gains['common']['velocity_filter_hz'] > 0.0
+    streams = flight_streams(1, 0)
+    noise = SensorNoise(SensorErrors(position=0.01, velocity=0.02, attitude=0.01, body_rate=0.02), SensorErrors(),
+                        streams.sensor_noise, streams.sensor_bias)
+    fly_embedded(kind, make_scenario('hover', 0.2), PARAMS, DISTURBANCES, gains, 0.2, 1000.0,
+                 perturbations=Perturbations(sensor_noise=noise))
+    stage = build_measurement_stage(gains)
+    replayed = [stage(step.measured) for step in steps]
+    assert len(spies[0].seen) == len(steps) == 200
+    np.testing.assert_array_equal(spies[0].seen, replayed)
+    raw = np.array([step.measured for step in steps])
+    seen = np.array(spies[0].seen)
+    for component in (0, 1, 2, 3, 4, 5, 6, 7, 8):     # position, velocity, angles filtered; the rates are not
+        assert np.std(np.diff(seen[:, component])) < 0.5 * np.std(np.diff(raw[:, component])), component
+    np.testing.assert_array_equal(seen[:, 9:], raw[:, 9:])
+
+
+def test_the_measurement_stage_is_off_for_every_kind_without_its_gains_and_refuses_a_non_finite_state():
+    gains = unflatten_gains({**flatten_gains(load_gains()), 'common.measurement_filter_hz': 0.0,
+                             'common.velocity_filter_hz': 0.0})
+    stage = build_measurement_stage(gains)
+    state = [0.1 * i for i in range(12)]
+    assert stage.filters == () and stage(state) == state
+    on = build_measurement_stage(load_gains())
+    on(state)
+    with pytest.raises(ValueError, match='non-finite'):
+        on([math.nan] + state[1:])
+    assert on([v + 0.01 for v in state]) != [v + 0.01 for v in state]   # its estimate survived the refusal
+
+
+def test_a_campaign_spec_switches_the_measurement_stage_of_every_controller():
+    from flight_stack.campaign.batch import CampaignSetup
+    from flight_stack.campaign.spec import parse_spec
+    from quad_msgs_bridge.vehicle_params import ParameterError
+    base = {'scenario': 'hover', 'controllers': ['pid', 'nnit2fsmc'], 'flights': 1}
+    on = CampaignSetup.of(parse_spec(base)).gains['common']
+    off = CampaignSetup.of(parse_spec({**base, 'measurement_filters': False})).gains['common']
+    assert on['measurement_filter_hz'] > 0.0 and on['velocity_filter_hz'] > 0.0
+    assert off['measurement_filter_hz'] == 0.0 and off['velocity_filter_hz'] == 0.0
+    with pytest.raises(ParameterError, match='measurement_filters'):
+        parse_spec({**base, 'measurement_filters': 'yes'})
+
+
+def _bench(name):
+    import importlib.util
+    import sys
+    from pathlib import Path
+    bench = Path(__file__).resolve().parent.parent / 'bench'
+    sys.path.insert(0, str(bench))
+    spec = importlib.util.spec_from_file_location(name, bench / f'{name}.py')
+    module = sys.modules[name] = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize('lower_height, lower_half_width, type_reducer', [
+    (0.6, 0.35, 'km'), (0.6, 0.35, 'nie-tan'), (0.3, 0.2, 'km'), (0.9, 0.45, 'nie-tan'), (1.0, 0.5, 'km'),
+    (0.7, 0.5, 'km'), (0.7, 0.5, 'nie-tan')])
+def test_the_matching_slope_is_the_fuzzy_terms_derivative_at_s_zero(lower_height, lower_half_width, type_reducer):
+    """bench/baseline_gains.py's small-signal slope, derived from the membership functions, against a
+    central difference of the IT2 term itself at S = 0 (input_scale 1.7, output_gain 2.3)."""
+    from nnit2fsmc_controller.it2_fuzzy import IT2FuzzyCorrector
+    gains = _bench('baseline_gains')
+    fuzzy = IT2FuzzyCorrector(1.7, 2.3, lower_height, lower_half_width, type_reducer)
+    h = 1e-7
+    numerical = -(fuzzy(h) - fuzzy(-h)) / (2 * h)
+    assert gains.small_signal_slope(lower_height, lower_half_width, type_reducer) * 2.3 / 1.7 == \
+        pytest.approx(numerical, rel=1e-5)
+
+
+def test_the_packaged_baselines_are_matched_at_the_small_signal_slope():
+    """The default IT2 shape (H 0.6, w 0.35, KM): slope 1 / (2 H) = 0.8333 at S = 0, 17 % below the
+    least-squares slope over the universe, and the packaged pid's x derivative gain is that slope times
+    fuzzy_gain / input_scale."""
+    gains = _bench('baseline_gains')
+    packaged = load_gains()
+    assert gains.fuzzy_slope(packaged) == pytest.approx(1.0 / 1.2, rel=1e-12)
+    assert gains.least_squares_slope(packaged) == pytest.approx(1.0054, abs=1e-4)
+    x = packaged['nnit2fsmc']['axes']['x']
+    assert packaged['pid']['axes']['x']['kd'] == pytest.approx(x['fuzzy_gain'] / x['input_scale'] / 1.2, rel=1e-3)
+
+
+def _hover_with_yaw_rate_bias(kind, bias, seconds=20.0):
+    """Mean true yaw error [rad] over the last 5 s of a hover at 1 m with a constant ``bias`` [rad/s] on the
+    measured yaw rate, every controller through the default measurement stage."""
+    from flight_stack.closed_loop import ClosedLoop
+    from nnit2fsmc_controller.trajectory import make_scenario
+    from quad_sim.model import QuadrotorModel
+    from quad_sim.simulator import Simulator
+    gains = load_gains()
+    controller = build_controller(kind, PARAMS, gains)
+    start = [0.0, 0.0, 1.0] + [0.0] * 9
+    simulator = Simulator(QuadrotorModel(PARAMS, DISTURBANCES.switched(False)), controller.dt, start)
+    simulator.forces = (PARAMS.hover_force,) * 4
+    hold = make_scenario('hover', seconds).sample(0.0)._replace(position=(0.0, 0.0, 1.0))
+
+    def biased(t, state):
+        return [*state[:11], state[11] + bias], None
+    loop = ClosedLoop(controller, simulator, lambda t: hold, 1, FailureRules(seconds, 1.0), observe=biased,
+                      measurement=build_measurement_stage(gains))
+    errors = []
+    for k in range(int(round(seconds / controller.dt))):
+        step = loop.step()
+        if step.time >= seconds - 5.0:
+            errors.append(step.truth[8] - hold.yaw)
+    return float(np.mean(errors)), gains
+
+
+@pytest.mark.parametrize('kind', ['nnit2fsmc', 'pid'])
+def test_a_constant_gyro_bias_leaves_the_steady_yaw_error_of_the_formula(kind):
+    """The NNIT2FSMC's adaptation (network and fuzzy term) drives the measured surface S = de + lambda e to 0,
+    so a bias b on the measured yaw rate leaves the estimated error -b / lambda; the PID's integral drives the
+    estimated error itself to 0. The complementary filter's estimate leads the true yaw by b / w
+    (w = 2 pi measurement_filter_hz: its steady state under a rate bias). True steady errors:
+    nnit2fsmc -b / lambda - b / w (14.1 mrad at b = 0.05 rad/s, lambda 4), pid -b / w (1.6 mrad)."""
+    bias = 0.05
+    error, gains = _hover_with_yaw_rate_bias(kind, bias)
+    w = 2 * math.pi * gains['common']['measurement_filter_hz']
+    expected = -bias / w - (bias / gains['common']['lambda']['psi'] if kind == 'nnit2fsmc' else 0.0)
+    assert error == pytest.approx(expected, rel=0.05)

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import nnit2fsmc_controller
-from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, load_gains
-from nnit2fsmc_controller.tuning import has_state, retune
+from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, build_measurement_stage, load_gains
+from nnit2fsmc_controller.tuning import has_state, retune, retune_measurement
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
@@ -121,3 +121,25 @@ def test_a_batch_controller_is_retuned_vehicle_by_vehicle():
 def test_tuning_module_is_documented():
     from nnit2fsmc_controller import tuning
     assert 'STATE' in inspect.getdoc(tuning)
+
+
+def test_a_retuned_measurement_stage_keeps_its_filter_estimates():
+    """Retuning the measurement stage to the same gains continues exactly as the running stage; a new
+    crossover applies from the next sample with the estimate carried; a filter switched on starts afresh."""
+    gains = load_gains()
+    running, untouched = build_measurement_stage(gains), build_measurement_stage(gains)
+    for state in states(50):
+        running(state), untouched(state)
+    retuned = retune_measurement(running, copy.deepcopy(gains))
+    for state in states(20, seed=1):
+        assert retuned(state) == untouched(state)
+    faster = copy.deepcopy(gains)
+    faster['common']['measurement_filter_hz'] = 20.0
+    assert retune_measurement(retuned, faster).complementary._estimate == retuned.complementary._estimate
+    off = copy.deepcopy(gains)
+    off['common']['velocity_filter_hz'] = 0.0
+    switched = retune_measurement(retune_measurement(retuned, off), gains)
+    assert switched.velocity._velocity is None
+    off['common']['velocity_filter_hz'] = -1.0
+    with pytest.raises(ParameterError, match='velocity_filter_hz'):
+        retune_measurement(retuned, off)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nnit2fsmc_controller.factory import build_controller, load_gains
+from nnit2fsmc_controller.factory import build_controller, build_measurement_stage, load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.review.metrics import chattering_force, chattering_moment, tracking_metrics
 from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
@@ -67,6 +67,8 @@ class CampaignSetup:
         gains = load_gains(gains_file)
         if spec.control_rate_hz is not None:
             gains.setdefault('common', {})['control_rate'] = spec.control_rate_hz
+        if not spec.measurement_filters:
+            gains.setdefault('common', {}).update(measurement_filter_hz=0.0, velocity_filter_hz=0.0)
         control_dt = 1.0 / gains['common']['control_rate']
         physics_rate = spec.physics_rate_hz or 1.0 / control_dt
         substeps = physics_substeps(control_dt, physics_rate)
@@ -112,7 +114,8 @@ def _fly(job: BatchJob, steps: int | None) -> list[dict]:
     simulator = Simulator(model, setup.physics_dt, start, motor_lag=perturbations.motor_lag, wind=perturbations.wind)
     setpoints = setpoint_path(published_path(setup.trajectory, 50.0))
     loop = ClosedLoop(controller, simulator, setpoints.sample, setup.substeps, setup.rules(spec),
-                      sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, statistics=True)
+                      sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, statistics=True,
+                      measurement=build_measurement_stage(setup.gains))
     with np.errstate(all='ignore'):      # a failing vehicle may overflow before it is frozen
         for _ in range(setup.steps(spec) if steps is None else steps):
             loop.step()

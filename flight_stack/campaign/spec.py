@@ -25,6 +25,8 @@ left out means no such perturbation; other tools write these files, so the names
     motor_time_constant_s: 0.03
     control_rate_hz: 1000
     physics_rate_hz: 1000      # a whole multiple of control_rate_hz (default: equal to it)
+    measurement_filters: true  # every controller reads through the gains file's measurement stage
+                               # (common.measurement_filter_hz, common.velocity_filter_hz); false: none
 
 ``inertia`` draws Ix, Iy and Iz on their own. A distribution is a number (relative uniform half
 width), ``{dist: uniform, half_width: x}`` or ``{dist: normal, std: s}``; relative draws must keep a
@@ -62,7 +64,7 @@ NOISE_KEYS = ('position_m', 'velocity_mps', 'attitude_rad', 'body_rate_radps')
 _STANDARD_NORMAL = NormalDist()
 TOP_KEYS = ('scenario', 'duration', 'settle_time', 'controllers', 'flights', 'seed', 'max_error_m',
             'disturbances', 'vehicle', 'wind', 'sensor_noise', 'delay_s', 'motor_time_constant_s',
-            'control_rate_hz', 'physics_rate_hz')
+            'control_rate_hz', 'physics_rate_hz', 'measurement_filters')
 
 
 @dataclass(frozen=True)
@@ -119,6 +121,7 @@ class CampaignSpec:
     motor_time_constant_s: float = 0.0
     control_rate_hz: float | None = None
     physics_rate_hz: float | None = None
+    measurement_filters: bool = True     #: False: every controller reads the measurement unfiltered
     source: str = ''                     #: the YAML text it was read from (kept with the results)
 
     @property
@@ -252,6 +255,9 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
     if disturbances is not None and not isinstance(disturbances, bool):
         raise ParameterError(f'disturbances: expected true or false, got {disturbances!r}')
     direction = wind.get('direction_deg')
+    measurement_filters = top.get('measurement_filters', True)
+    if not isinstance(measurement_filters, bool):
+        raise ParameterError(f'measurement_filters: expected true or false, got {measurement_filters!r}')
     spec = CampaignSpec(
         scenario=scenario,
         controllers=_controllers(top['controllers'], 'controllers'),
@@ -274,6 +280,7 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
                          else check_number('control_rate_hz', top['control_rate_hz'], 0.0, 1e5, low_inclusive=False)),
         physics_rate_hz=(None if 'physics_rate_hz' not in top
                          else check_number('physics_rate_hz', top['physics_rate_hz'], 0.0, 1e6, low_inclusive=False)),
+        measurement_filters=measurement_filters,
         source=source)
     if 'rotor_efficiency_loss' in spec.vehicle and spec.vehicle['rotor_efficiency_loss'].bound >= 1.0:
         raise ParameterError('vehicle.rotor_efficiency_loss: a rotor cannot lose all of its thrust; keep it below 1')

@@ -65,7 +65,6 @@ from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, controls_from_forces
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
 from .axis_laws import AxisOutput
-from .estimation import ComplementaryFilter, VelocityFilter
 
 AXES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
 ATTITUDE_RATES = ('flatness', 'filter')   #: sources of the desired roll/pitch rates (module docstring)
@@ -240,18 +239,15 @@ def flat_attitude_of(ax, ay, jx, jy, sx, sy, psi, dpsi, ddpsi, z, g, limit):
 class CascadedController:
     """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws."""
 
-    STATE = ()   #: its state lives in its laws, rate filters, measurement and velocity filters (nnit2fsmc_controller.tuning)
+    STATE = ()   #: its state lives in its laws and rate filters (nnit2fsmc_controller.tuning)
 
     def __init__(self, name: str, params: VehicleParams, laws: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
-                 attitude_rates: str = 'filter', measurement_filter_hz: float = 0.0, takeoff_height: float = 0.0,
-                 velocity_filter_hz: float = 0.0, low_altitude_max_tilt: float | None = None,
-                 low_altitude_height: float = 0.0, batch: int | None = None):
-        """``measurement_filter_hz`` > 0: the laws see position and angles through a complementary
-        filter of that crossover (:mod:`.estimation`); 0 feeds them the measurement as it is.
-        ``velocity_filter_hz`` > 0: they see the measured velocities through a first-order low-pass
-        of that cutoff (:class:`.estimation.VelocityFilter`, after the complementary filter, which
-        integrates the measured velocities as they are); 0: as measured.
+                 attitude_rates: str = 'filter', takeoff_height: float = 0.0,
+                 low_altitude_max_tilt: float | None = None, low_altitude_height: float = 0.0,
+                 batch: int | None = None):
+        """The state it reads has passed the measurement stage of every controller kind
+        (:class:`.estimation.MeasurementStage`, applied by the closed loop and the controller node).
 
         ``takeoff_height`` > 0 [m, world z; the ground is z = 0]: while a vehicle's (filtered) height is
         not above it, the networks of HELD_ON_GROUND do not learn (the laws' ``learning`` flag; laws
@@ -276,10 +272,6 @@ class CascadedController:
         if attitude_rates not in ATTITUDE_RATES:
             raise ParameterError(f'common.attitude_rates: {attitude_rates!r} is not one of {", ".join(ATTITUDE_RATES)}')
         self.attitude_rates = attitude_rates
-        self.measurement_filter = (ComplementaryFilter(self.dt, measurement_filter_hz)
-                                   if check_number('measurement_filter_hz', measurement_filter_hz, 0.0) > 0.0 else None)
-        self.velocity_filter = (VelocityFilter(self.dt, velocity_filter_hz)
-                                if check_number('velocity_filter_hz', velocity_filter_hz, 0.0) > 0.0 else None)
         self.takeoff_height = check_number('takeoff_height', takeoff_height, 0.0)
         self._held_on_ground = ([laws[axis] for axis in HELD_ON_GROUND if hasattr(laws[axis], 'learning')]
                                 if self.takeoff_height > 0.0 else [])
@@ -294,10 +286,6 @@ class CascadedController:
         """
         xp = check_inputs(t, state, reference, self.batch)
         p = self.params
-        if self.measurement_filter is not None:
-            state = self.measurement_filter(state)
-        if self.velocity_filter is not None:
-            state = self.velocity_filter(state)
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         laws = self.laws
         if self._held_on_ground:

@@ -40,9 +40,9 @@ from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.timebase import nanoseconds, seconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
-from .factory import (CONTROLLERS, build_controller, compile_kernels, flatten_gains, gain_choices, gain_description,
-                      load_gains, unflatten_gains)
-from .tuning import restart_reason, retune
+from .factory import (CONTROLLERS, build_controller, build_measurement_stage, compile_kernels, flatten_gains,
+                      gain_choices, gain_description, load_gains, unflatten_gains)
+from .tuning import restart_reason, retune, retune_measurement
 from .trajectory import Waypoints
 
 _UNBOUNDED = (0.0, math.inf)
@@ -77,6 +77,7 @@ class ControllerNode(Node):
         self.kind, self.gains = kind, unflatten_gains(self.flat_gains)
         try:
             self.controller = build_controller(kind, self.params, self.gains)
+            self.measurement = build_measurement_stage(self.gains)   # the closed loop's stage, for every kind
         except (ParameterError, ValueError) as error:
             raise ParameterError(f'controller gains: {error}') from error
         compile_kernels(kind, self.params, self.gains)   # before subscribing: the first answer is not slower
@@ -134,7 +135,7 @@ class ControllerNode(Node):
         t = sample.stamp
         reference = self.path.sample(t)
         try:
-            out = self.controller.update(t, state, reference)
+            out = self.controller.update(t, self.measurement(state), reference)
         except ValueError as error:
             self.get_logger().error(f'controller refused its input: {error}; holding the last forces',
                                     throttle_duration_sec=1.0)
@@ -165,11 +166,13 @@ class ControllerNode(Node):
             flat = {**self.flat_gains, **changes}
             try:
                 tuned = retune(self.controller, unflatten_gains(flat))
+                measurement = retune_measurement(self.measurement, unflatten_gains(flat))
             except (ParameterError, ValueError) as error:
                 self.get_logger().warning(f'refused gains {changes}: {error}')
                 return SetParametersResult(successful=False, reason=str(error))
             said = ', '.join(f'{name} {self.flat_gains[name]} -> {value}' for name, value in changes.items())
-            self.controller, self.flat_gains, self.gains = tuned, flat, unflatten_gains(flat)
+            self.controller, self.measurement = tuned, measurement
+            self.flat_gains, self.gains = flat, unflatten_gains(flat)
             self.get_logger().info(f'gains changed in flight: {said}; applied from the next control update '
                                    f'(after t={seconds(max(self.last_answered_ns, 0)):.3f} s), learned state kept')
         if goal_speed is not None:
@@ -181,6 +184,7 @@ class ControllerNode(Node):
         self.get_logger().warning(f'odometry time jumped back from {seconds(self.last_answered_ns):.3f} s to '
                                   f'{seconds(stamp_ns):.3f} s (simulator restarted?): restarting the controller')
         self.controller = build_controller(self.kind, self.params, self.gains)
+        self.measurement = build_measurement_stage(self.gains)
         self.last_answered_ns = -1
 
     def on_setpoints(self, msg) -> None:

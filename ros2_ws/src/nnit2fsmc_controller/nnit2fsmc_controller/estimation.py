@@ -1,4 +1,13 @@
-"""Complementary filter of the measured position and Euler angles (controller-side measurement filtering).
+"""The measurement stage: what every controller kind reads, the measured 12-state through the same filters.
+
+:class:`MeasurementStage` passes a measured state through the complementary filter of position and
+Euler angles (:class:`ComplementaryFilter`), then through the low-pass of the velocities
+(:class:`VelocityFilter`), each only when its frequency is positive. It sits between the
+measurement and the control law, in the closed loop and in the ROS controller node alike, with the
+gains ``common.measurement_filter_hz`` and ``common.velocity_filter_hz`` for every controller kind:
+a comparison of controllers is a comparison of control laws, not of pipelines.
+
+Complementary filter of the measured position and Euler angles.
 
 The sliding surfaces S = de + lambda e take the position and angle errors with gain lambda, so
 white noise on the measured position [m] and angles [rad] reaches the controls at the full control
@@ -20,6 +29,7 @@ import math
 from numba import njit
 
 from quad_msgs_bridge.frames import wrap_angle
+from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.vehicle_params import check_number
 
 #: (filtered component, its rate) in the controller's 12-state x y z vx vy vz phi theta psi dphi dtheta dpsi
@@ -118,3 +128,37 @@ def _velocity_step(state, velocity, blend):
     vy = velocity[1] + blend * (state[4] - velocity[1])
     vz = velocity[2] + blend * (state[5] - velocity[2])
     return (state[0], state[1], state[2], vx, vy, vz, state[6], state[7], state[8], state[9], state[10], state[11])
+
+
+class MeasurementStage:
+    """stage(state) -> the 12-state a controller reads: the measured ``state`` (x y z [m, world ENU],
+    vx vy vz [m/s, world], phi theta psi [rad], their rates [rad/s]) through the complementary filter
+    (crossover ``measurement_filter_hz`` [Hz], 0: none), then the velocity filter (cutoff
+    ``velocity_filter_hz`` [Hz], 0: none), at the control period ``dt`` [s]. With both 0 it returns
+    the measurement unchanged. The same stage serves every controller kind (module docstring).
+
+    A non-finite measurement raises ValueError before any filter takes it in (their estimates stay
+    as they were)."""
+
+    STATE = ()   #: its state lives in its filters (nnit2fsmc_controller.tuning)
+
+    def __init__(self, dt: float, measurement_filter_hz: float = 0.0, velocity_filter_hz: float = 0.0):
+        dt = check_number('dt', dt, 0.0, low_inclusive=False)
+        self.complementary = (ComplementaryFilter(dt, measurement_filter_hz)
+                              if check_number('measurement_filter_hz', measurement_filter_hz, 0.0) > 0.0 else None)
+        self.velocity = (VelocityFilter(dt, velocity_filter_hz)
+                         if check_number('velocity_filter_hz', velocity_filter_hz, 0.0) > 0.0 else None)
+
+    @property
+    def filters(self) -> tuple:
+        """The filters it applies, in order."""
+        return tuple(f for f in (self.complementary, self.velocity) if f is not None)
+
+    def __call__(self, state) -> list:
+        if not self.filters:
+            return list(state)
+        if not namespace_for(state[0]).all_finite(state):
+            raise ValueError('measurement stage: non-finite measured state')
+        for stage_filter in self.filters:
+            state = stage_filter(state)
+        return list(state)

@@ -16,6 +16,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check
 
 from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
 from .controller import ATTITUDE_RATES, AXES, CascadedController
+from .estimation import MeasurementStage
 from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector, SaturationCorrector
 from .neural_network import MODIFICATIONS, EquivalentControlNetwork
 from .se3 import SE3Controller
@@ -40,9 +41,8 @@ PAPER_FAITHFUL: dict = {
     'nnit2fsmc.axes.phi.fuzzy_gain': 1.0, 'nnit2fsmc.axes.theta.fuzzy_gain': 1.0,
     'nnit2fsmc.learning_rate_unit': 'per_update',
     'nnit2fsmc.modification': 'none',
-    'nnit2fsmc.measurement_filter_hz': 0.0,
+    'common.measurement_filter_hz': 0.0, 'common.velocity_filter_hz': 0.0,
     'nnit2fsmc.takeoff_height': 0.0,
-    'nnit2fsmc.velocity_filter_hz': 0.0,
     'nnit2fsmc.axes.x.learning_rate': 0.01, 'nnit2fsmc.axes.y.learning_rate': 0.01,
     'nnit2fsmc.axes.z.learning_rate': 0.002, 'nnit2fsmc.axes.phi.learning_rate': 0.05,
     'nnit2fsmc.axes.theta.learning_rate': 0.05, 'nnit2fsmc.axes.psi.learning_rate': 30.0,
@@ -208,12 +208,18 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
     return CascadedController(
         kind, params, laws, dt, **structure, batch=batch,
         attitude_rates=_get(gains, 'common.attitude_rates'),
-        measurement_filter_hz=(_non_negative(gains, 'nnit2fsmc.measurement_filter_hz')
-                               if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0),
         takeoff_height=(_non_negative(gains, 'nnit2fsmc.takeoff_height')
-                        if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0),
-        velocity_filter_hz=(_non_negative(gains, 'nnit2fsmc.velocity_filter_hz')
-                            if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0))
+                        if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0))
+
+
+def build_measurement_stage(gains: Mapping[str, Any] | None = None) -> MeasurementStage:
+    """The measurement stage every controller kind reads through (:class:`.estimation.MeasurementStage`),
+    from ``common.measurement_filter_hz`` and ``common.velocity_filter_hz`` at the control period; one
+    stage serves one vehicle or a batch (its filters take floats or arrays)."""
+    gains = load_gains() if gains is None else gains
+    return MeasurementStage(control_period(gains),
+                            measurement_filter_hz=_non_negative(gains, 'common.measurement_filter_hz'),
+                            velocity_filter_hz=_non_negative(gains, 'common.velocity_filter_hz'))
 
 
 def compile_kernels(kind: str, params: VehicleParams, gains: Mapping[str, Any] | None = None) -> None:
@@ -295,8 +301,10 @@ GAIN_DESCRIPTIONS = {
     'allocation': 'rotor limits: priority (U1 kept, then roll/pitch scaled to fit, yaw last) or clip (each rotor '
                   'clipped, paper-faithful)',
     'attitude_rates': 'desired roll/pitch rates: flatness (from the reference jerk and snap) or filter (paper)',
-    'measurement_filter_hz': 'crossover of the complementary filter of measured position and angles [Hz] (0: none, paper)',
-    'velocity_filter_hz': 'cutoff of the first-order low-pass of the measured velocities [Hz] (0: none, paper)',
+    'measurement_filter_hz': 'crossover of the complementary filter of measured position and angles [Hz], the '
+                             'measurement stage of every controller kind (0: none, paper)',
+    'velocity_filter_hz': 'cutoff of the first-order low-pass of the measured velocities [Hz], the measurement '
+                          'stage of every controller kind (0: none, paper)',
     'takeoff_height': 'height [m, ground at z = 0] below which the vehicle is kept level and the x, y and attitude '
                       'networks do not learn (0: off, paper)',
     'modification': 'leakage of the NN learning: none (paper), sigma (sigma-modification) or e (e-modification)',

@@ -15,7 +15,8 @@ import numpy as np
 from quad_msgs_bridge.vehicle_params import ParameterError
 
 from .controller import CascadedController
-from .factory import build_controller
+from .estimation import MeasurementStage
+from .factory import build_controller, build_measurement_stage
 
 #: gains whose change needs a new controller (and their reason)
 RESTART_GAINS = {
@@ -41,6 +42,17 @@ def retune(controller: CascadedController, gains: Mapping[str, Any], batch: int 
         raise ParameterError(f'common.control_rate: cannot change in flight ({RESTART_GAINS["common.control_rate"]}); '
                              'restart the controller')
     _carry_state(controller, fresh, 'controller')
+    return fresh
+
+
+def retune_measurement(stage: MeasurementStage, gains: Mapping[str, Any]) -> MeasurementStage:
+    """The measurement stage of ``gains`` going on from ``stage``'s filter estimates (a filter switched
+    on in flight starts from the next measurement). Raises ParameterError naming an invalid gain."""
+    fresh = build_measurement_stage(gains)
+    for name in ('complementary', 'velocity'):
+        old, new = getattr(stage, name), getattr(fresh, name)
+        if old is not None and new is not None:
+            _carry_state(old, new, f'measurement.{name}')
     return fresh
 
 

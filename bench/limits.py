@@ -1,0 +1,127 @@
+#!/usr/bin/env python3
+"""The structural limits of the NNIT2FSMC beside the baselines, with their figures.
+
+    .venv/bin/python bench/limits.py [--duration 30] [--jobs 2] [--out limits.md]
+
+1. **Gyro bias.** A constant bias b on the measured yaw rate, hover at 1 m for 20 s (no disturbance),
+   every controller through the default measurement stage: the mean true yaw error of the last 5 s
+   beside the formula. The NNIT2FSMC's adaptive action (network and fuzzy term) acts on the measured
+   surface S = de + lambda e and drives it to 0, leaving the estimated error -b / lambda; an integral
+   of the error (pid, se3, smc-integral) drives the estimated error to 0. The complementary filter's
+   yaw estimate leads the true yaw by b / w (w = 2 pi measurement_filter_hz). Formula: nnit2fsmc
+   -b / lambda_psi - b / w; pid, se3 and smc-integral -b / w (tests/test_science_regressions.py checks
+   nnit2fsmc and pid to 5 %).
+2. **Authority against wind.** The paper helix (``--duration`` s, section IV disturbances) in a
+   steady 6 m/s wind along +x: RMSE per controller. The network's output is capped at nn_gain
+   (x, y: 1.5 m/s^2) and the fuzzy term at fuzzy_gain; the integral action of the baselines has no
+   such cap below its clamp. ``nnit2fsmc nn_gain 3``: the same with x, y nn_gain 3 m/s^2.
+3. **Authority against path speed.** The helix three times faster (0.5 -> 1.5 rad/s: 1.5 m/s,
+   2.25 m/s^2 centripetal), no wind: RMSE per controller, and the same nn_gain 3 row.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
+from paper_tables import run_all  # noqa: E402
+from flight_stack.closed_loop import ClosedLoop, FailureRules  # noqa: E402
+from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
+from nnit2fsmc_controller.factory import build_controller, build_measurement_stage, load_gains  # noqa: E402
+from nnit2fsmc_controller.trajectory import Helix, make_scenario  # noqa: E402
+from quad_msgs_bridge.review.metrics import flight_metrics  # noqa: E402
+from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
+from quad_sim.model import QuadrotorModel  # noqa: E402
+from quad_sim.perturbations.wind import Wind  # noqa: E402
+from quad_sim.simulator import Simulator  # noqa: E402
+
+CONTROLLERS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral')
+BIAS = 0.05          #: [rad/s] on the measured yaw rate
+WIND = 6.0           #: [m/s] along +x
+FAST = 1.5           #: [rad/s] helix angular rate (paper: 0.5)
+HOVER = 20.0         #: [s]
+
+
+def yaw_error_under_bias(kind: str) -> tuple[float, float]:
+    """(mean true yaw error [rad] of the last 5 s, the formula's) for a hover with BIAS on the yaw rate."""
+    params, disturbances = load_vehicle_file()
+    gains = load_gains()
+    controller = build_controller(kind, params, gains)
+    simulator = Simulator(QuadrotorModel(params, disturbances.switched(False)), controller.dt,
+                          [0.0, 0.0, 1.0] + [0.0] * 9)
+    simulator.forces = (params.hover_force,) * 4
+    hold = make_scenario('hover', HOVER).sample(0.0)._replace(position=(0.0, 0.0, 1.0))
+    loop = ClosedLoop(controller, simulator, lambda t: hold, 1, FailureRules(HOVER, 1.0),
+                      observe=lambda t, s: ([*s[:11], s[11] + BIAS], None), measurement=build_measurement_stage(gains))
+    errors = []
+    for _ in range(int(round(HOVER / controller.dt))):
+        step = loop.step()
+        if step.time >= HOVER - 5.0:
+            errors.append(step.truth[8] - hold.yaw)
+    w = 2.0 * math.pi * gains['common']['measurement_filter_hz']
+    formula = -BIAS / w - (BIAS / gains['common']['lambda']['psi'] if kind == 'nnit2fsmc' else 0.0)
+    return float(np.mean(errors)), formula
+
+
+def helix_rmse(task) -> tuple[float, str | None]:
+    """(RMSE [cm] after 5 s, failure) of (kind, nn_gain or None, wind [m/s], angular rate [rad/s], duration)."""
+    kind, nn_gain, wind, rate, duration = task
+    params, disturbances = load_vehicle_file()
+    gains = load_gains()
+    if nn_gain is not None:
+        gains = copy.deepcopy(gains)
+        for axis in ('x', 'y'):
+            gains['nnit2fsmc']['axes'][axis]['nn_gain'] = nn_gain
+    perturbations = Perturbations(wind=Wind(1e-3, mean_speed=wind, direction=0.0) if wind else None)
+    result = fly_embedded(kind, Helix(angular_rate=rate, duration=duration), params, disturbances, gains, duration,
+                          1000.0, perturbations=perturbations, rules=FailureRules(5.0, 1.0))
+    if result.failure is not None and result.failure_time_s <= 5.0:
+        return math.nan, result.failure
+    metrics = flight_metrics(result.record, 5.0, params.F_min, params.F_max)
+    return 100.0 * metrics['rmse_position_m'], result.failure
+
+
+def _bias_task(kind):
+    return yaw_error_under_bias(kind)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--duration', type=float, default=30.0, help='[s] helix flights (default 30)')
+    parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--out', type=Path)
+    args = parser.parse_args(argv)
+    rows = [(kind, None) for kind in CONTROLLERS] + [('nnit2fsmc', 3.0)]
+    bias = run_all(_bias_task, list(CONTROLLERS), args.jobs)
+    tasks = [(kind, nn, WIND, 0.5, args.duration) for kind, nn in rows] + \
+            [(kind, nn, 0.0, FAST, args.duration) for kind, nn in rows]
+    flown = dict(zip(tasks, run_all(helix_rmse, tasks, args.jobs)))
+    lines = [f'### Constant yaw-rate bias {BIAS:g} rad/s, hover {HOVER:g} s (bench/limits.py)', '',
+             '| controller | steady yaw error [mrad] | formula [mrad] |', '|---|---:|---:|']
+    lines += [f'| {kind} | {1e3 * e:.2f} | {1e3 * f:.2f} |' for kind, (e, f) in zip(CONTROLLERS, bias)]
+    lines += ['', f'### Authority: helix ({args.duration:g} s) in a {WIND:g} m/s wind, and {FAST / 0.5:g}x faster '
+              '(bench/limits.py)', '', f'| controller | RMSE [cm] wind {WIND:g} m/s | RMSE [cm] helix x{FAST / 0.5:g} |',
+              '|---|---:|---:|']
+    for kind, nn in rows:
+        name = kind if nn is None else f'{kind} (x, y nn_gain {nn:g})'
+        cells = []
+        for task in ((kind, nn, WIND, 0.5, args.duration), (kind, nn, 0.0, FAST, args.duration)):
+            rmse, failure = flown[task]
+            cells.append(f'{rmse:.3g}' + (f' ({failure})' if failure else ''))
+        lines.append(f'| {name} | {cells[0]} | {cells[1]} |')
+    text = '\n'.join(lines)
+    print(text)
+    if args.out is not None:
+        args.out.write_text(text + '\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
