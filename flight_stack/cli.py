@@ -27,11 +27,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
-import signal
 import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from flight_stack.interrupts import deferred, stop_signals
 
 #: third-party modules the stack imports -> the distribution that provides them
 DEPENDENCIES = {'numpy': 'numpy', 'yaml': 'PyYAML', 'rosbags': 'rosbags', 'mcap': 'mcap', 'zstandard': 'zstandard',
@@ -101,24 +102,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-@contextlib.contextmanager
-def stop_signals():
-    """SIGINT (Ctrl-C) and SIGTERM, noted rather than raised: yields ``stop()``, true once one came.
-
-    The embedded flight checks it between two control steps, so a signal never lands in the
-    middle of a message being added to the bag (a KeyboardInterrupt there once left a message
-    counted in the bag's index that was not in its chunk).
-    """
-    received: list[int] = []
-    previous = {number: signal.signal(number, lambda signum, frame: received.append(signum))
-                for number in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield lambda: bool(received)
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
-
-
 def choose_backend(requested: str, live: bool) -> str:
     if requested != 'auto':
         return requested
@@ -179,6 +162,22 @@ def live_sinks(server, params, topics, speed_factor: float) -> list:
     return ([Pacer(speed_factor)] if speed_factor > 0.0 else []) + [LiveView(server, params, topics=topics)]
 
 
+@contextlib.contextmanager
+def closed_whole(recording):
+    """``with recording`` whose closing (a bag's summary and metadata) a stop signal does not cut."""
+    with deferred():
+        entered = recording.__enter__()
+    try:
+        yield entered
+    except BaseException as error:
+        with deferred():
+            if not recording.__exit__(type(error), error, error.__traceback__):
+                raise
+    else:
+        with deferred():
+            recording.__exit__(None, None, None)
+
+
 class FlightStopped(Exception):
     """The flight did not finish; the message says why, ``code`` is the exit status."""
 
@@ -206,19 +205,19 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
     from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
     from quad_msgs_bridge.review.flight_from_bag import BagFlight
 
-    with stop_signals() as stop, live_server or contextlib.nullcontext():
+    with stop_signals(), live_server or contextlib.nullcontext():
         sinks = live_sinks(live_server, plan.params, plan.topics, speed_factor) if live_server else []
         if live_server and live_wait:
             print('live view: waiting for a client to subscribe (Ctrl-C to stop)', flush=True)
-            if not live_server.wait_for_subscriber(stop):
-                raise KeyboardInterrupt('stopped before the flight')
-        recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
-                                      controller=plan.controller, scenario=plan.scenario, backend='embedded',
-                                      seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled))
-                     if bag else contextlib.nullcontext())
-        with recording as written:
+            live_server.wait_for_subscriber(lambda: False)   # a stop signal raises KeyboardInterrupt meanwhile
+        with deferred():
+            recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
+                                          controller=plan.controller, scenario=plan.scenario, backend='embedded',
+                                          seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled))
+                         if bag else contextlib.nullcontext())
+        with closed_whole(recording) as written:
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
-                                  plan.duration, plan.physics_rate, progress=progress, bag=written, stop=stop,
+                                  plan.duration, plan.physics_rate, progress=progress, bag=written,
                                   sinks=sinks, rules=FailureRules(plan.settle_time, max_error=math.inf))
             for sink in sinks:
                 sink.close()
@@ -239,15 +238,16 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
 
     vehicles = fleet_layout(args.vehicles, args.namespace)
     trajectories = [make_scenario(plan.scenario, plan.duration, offset=vehicle.offset) for vehicle in vehicles]
-    with stop_signals() as stop:
-        recording = (FleetBag.create(bag, plan.params, plan.settle_time, [v.namespace for v in vehicles],
-                                     topics=plan.topics, controller=plan.controller, scenario=plan.scenario,
-                                     backend='embedded', seed=plan.seed,
-                                     disturbances=disturbances_label(plan.disturbances.enabled))
-                     if bag else contextlib.nullcontext())
-        with recording as written:
+    with stop_signals():
+        with deferred():
+            recording = (FleetBag.create(bag, plan.params, plan.settle_time, [v.namespace for v in vehicles],
+                                         topics=plan.topics, controller=plan.controller, scenario=plan.scenario,
+                                         backend='embedded', seed=plan.seed,
+                                         disturbances=disturbances_label(plan.disturbances.enabled))
+                         if bag else contextlib.nullcontext())
+        with closed_whole(recording) as written:
             results = fly_fleet(plan.controller, trajectories, plan.params, plan.disturbances, plan.gains,
-                                plan.duration, plan.physics_rate, progress=not args.quiet, bag=written, stop=stop,
+                                plan.duration, plan.physics_rate, progress=not args.quiet, bag=written,
                                 rules=FailureRules(plan.settle_time, max_error=math.inf))
     flights = []
     for vehicle, result in zip(vehicles, results):
@@ -321,7 +321,11 @@ def review_now(flown: Flown, plan, out: Path) -> tuple[list[str], str | None]:
 def main(argv: list[str] | None = None) -> int:
     """``run_stack.py`` (and the ``nnit2fsmc-stack`` command): a flight, or a bag tool; the exit status."""
     try:
-        return run(sys.argv[1:] if argv is None else argv)
+        with stop_signals():
+            return run(sys.argv[1:] if argv is None else argv)
+    except KeyboardInterrupt:
+        print('interrupted', file=sys.stderr)
+        return 130
     except ModuleNotFoundError as error:
         top = (error.name or '').split('.')[0]
         if top not in DEPENDENCIES:
@@ -347,6 +351,8 @@ def run(argv: list[str]) -> int:
         from flight_stack.campaign.cli import main as campaign_main
         return campaign_main(argv[1:])
     args = parse_args(argv)
+    if not args.quiet:
+        print('planning the flight', flush=True)
     from flight_stack.fleet import MAX_VEHICLES
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
@@ -457,10 +463,17 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
     if len(flights) > 1:
         return report_fleet(flights, plan, backend, output, bag_shown)
     [(_, flown)] = flights
-    summary = summarize(flown, plan, backend)
-    write_summary(summary, output.out)
-    review_lines, report = review_now(flown, plan, output.out) if flown.flight is not None else ([], None)
-    output.commit()
+    try:
+        summary = summarize(flown, plan, backend)
+        write_summary(summary, output.out)
+        if flown.flight is not None and not args.quiet:
+            print('reviewing the flight (report and plots)', file=sys.stderr, flush=True)
+        review_lines, report = review_now(flown, plan, output.out) if flown.flight is not None else ([], None)
+        with deferred():
+            output.commit()
+    except KeyboardInterrupt:
+        return unfinished(output, 'interrupted' + (f' after the flight; bag closed: {output.bag}' if output.bag else ''),
+                          130)
     print(format_summary(summary))
     print_ros_lines(summary)
     print(f'summary: {output.out_dir / "summary.json"}')
