@@ -188,22 +188,21 @@ class FlightStopped(Exception):
 
 @dataclass
 class Flown:
-    """A finished flight: its record, for the summary, and (with a bag) the flight to review."""
+    """A finished flight: its data (time series and metrics, for the summary) and, with a bag, the flight to review."""
 
-    record: object                  #: quad_msgs_bridge.review.metrics.FlightRecord
+    data: object                    #: quad_msgs_bridge.review.flight_data.Flight
     wall_time_s: float
-    flight: object = None           #: quad_msgs_bridge.review.flight_from_bag.BagFlight, None without a bag
+    flight: object = None           #: the same Flight when it has a bag to review; None without a bag
     extra: dict = field(default_factory=dict)
     failure: str | None = None      #: why the flight ended early (flight_stack.closed_loop.FAILURES), if it did
 
 
 def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_server=None,
              speed_factor: float = 0.0, live_wait: bool = False) -> Flown:
-    """The embedded backend; with ``bag``, the flight to review is the record in memory (what the bag holds)."""
+    """The embedded backend; with ``bag``, the flight to review is the one in memory (what the bag holds)."""
     from flight_stack.closed_loop import FailureRules
     from flight_stack.embedded import fly_embedded
     from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
-    from quad_msgs_bridge.review.flight_from_bag import BagFlight
 
     with stop_signals(), live_server or contextlib.nullcontext():
         sinks = live_sinks(live_server, plan.params, plan.topics, speed_factor) if live_server else []
@@ -221,9 +220,10 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
                                   sinks=sinks, rules=FailureRules(plan.settle_time, max_error=math.inf))
             for sink in sinks:
                 sink.close()
-    flight = (BagFlight(bag_shown, plan.controller, result.record, plan.params, plan.settle_time,
-                        dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
-    return Flown(result.record, result.wall_time_s, flight, failure=result.failure)
+    flight = result.flight
+    if bag:
+        flight.path, flight.custom_data = bag_shown, dict(written.writer.custom_data)
+    return Flown(flight, result.wall_time_s, flight if bag else None, failure=result.failure)
 
 
 def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list[tuple[str, Flown]]:
@@ -234,7 +234,6 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
     from flight_stack.fleet import fleet_layout
     from nnit2fsmc_controller.trajectory import make_scenario
     from quad_msgs_bridge.bag.flight_bag import FleetBag, disturbances_label
-    from quad_msgs_bridge.review.flight_from_bag import BagFlight
 
     vehicles = fleet_layout(args.vehicles, args.namespace)
     trajectories = [make_scenario(plan.scenario, plan.duration, offset=vehicle.offset) for vehicle in vehicles]
@@ -251,9 +250,11 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
                                 rules=FailureRules(plan.settle_time, max_error=math.inf))
     flights = []
     for vehicle, result in zip(vehicles, results):
-        flight = (BagFlight(bag_shown, vehicle.namespace, result.record, plan.params, plan.settle_time,
-                            dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
-        flights.append((vehicle.namespace, Flown(result.record, result.wall_time_s, flight,
+        flight = result.flight
+        flight.label = vehicle.namespace
+        if bag:
+            flight.path, flight.custom_data = bag_shown, dict(written.writer.custom_data)
+        flights.append((vehicle.namespace, Flown(flight, result.wall_time_s, flight if bag else None,
                                                  {'offset_m': list(vehicle.offset)}, failure=result.failure)))
     return flights
 
@@ -291,7 +292,7 @@ def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str,
         extra = {'ros': {'namespace': vehicle.namespace, 'mode': args.mode,
                          'simulator': result.sim_report.split('] ')[-1], 'timing': timing},
                  **({'offset_m': list(vehicle.offset)} if len(vehicles) > 1 else {})}
-        flights.append((vehicle.namespace, Flown(flight.record, result.wall_time_s, flight if bag_shown else None,
+        flights.append((vehicle.namespace, Flown(flight, result.wall_time_s, flight if bag_shown else None,
                                                  extra)))
     return flights
 
@@ -406,7 +407,7 @@ def unfinished(output, message: str, code: int) -> int:
 def summarize(flown: Flown, plan, backend: str) -> dict:
     """The summary of a flown flight (metrics, outcome, settings)."""
     from flight_stack.summary import build_summary
-    summary = build_summary(flown.record, backend=backend, controller=plan.controller, scenario=plan.scenario,
+    summary = build_summary(flown.data.metrics(), backend=backend, controller=plan.controller, scenario=plan.scenario,
                             seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
                             disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
                             wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure)

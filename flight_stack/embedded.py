@@ -19,10 +19,11 @@ import numpy as np
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
 from quad_msgs_bridge.bag.flight_bag import FlightBag
-from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
+from quad_msgs_bridge.review.flight_data import Flight, FlightLog
+from quad_msgs_bridge.review.metrics import FlightRecord
 from quad_msgs_bridge.reference import ReferenceSample, SetpointPath
 from quad_msgs_bridge.runtime import freeze_long_lived_objects
-from quad_msgs_bridge.state import PSI, OdometrySample, odometry_from_state, state_from_odometry
+from quad_msgs_bridge.state import OdometrySample, odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.model import QuadrotorModel
 from quad_sim.perturbations.actuation import MotorLag, TransportDelay
@@ -49,11 +50,15 @@ class Perturbations:
 
 @dataclass
 class FlightResult:
-    record: FlightRecord
+    flight: Flight                     #: the flight's time series (bounded in memory: see flight_data)
     wall_time_s: float
     steps: int
     failure: str | None = None         #: None, or why the flight ended early (one of closed_loop.FAILURES)
     failure_time_s: float | None = None
+
+    @property
+    def record(self) -> FlightRecord:
+        return self.flight.record
 
 
 def published_path(trajectory, setpoint_rate: float) -> SetpointPath:
@@ -169,7 +174,7 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
                           motor_lag=perturbations.motor_lag, wind=perturbations.wind)
     loop = ClosedLoop(controller, simulator, setpoints.sample, substeps, rules,
                       sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, observe=through_odometry)
-    recorder = FlightRecorder()
+    log = FlightLog(rules.settle_time, params.F_min, params.F_max)
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     freeze_long_lived_objects()
@@ -185,9 +190,10 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
             print(f'  kernels ready in {time.perf_counter() - started:.1f} s; flying', file=sys.stderr, flush=True)
         out, reference, truth = done.output, done.reference, done.truth
         surfaces, equivalent, corrective = [list(field) for field in zip(*out.axes.values())][1:]   # per subsystem
-        recorder.append(done.time, truth[:3], truth[PSI], reference.position, reference.yaw,
-                        out.forces, out.controls, surfaces, equivalent, corrective)
         truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
+        # the state as the bag gives it back: the odometry read, or ground_truth/odom under sensor noise
+        log.add(done.time, done.measured if truth_odometry is None else state_from_odometry(truth_odometry),
+                reference.position, reference.yaw, out.forces, out.controls, surfaces, equivalent, corrective)
         with deferred():
             for sink in step_sinks:
                 sink.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
@@ -197,7 +203,9 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
         if progress and (k + 1) % report_every == 0:
             print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
     failure = None if loop.flying else FAILURES[loop.failure]
-    return FlightResult(recorder.record(), time.perf_counter() - started, len(recorder.rows), failure,
+    return FlightResult(log.flight(params, label=controller_kind, custom_data={'controller': controller_kind},
+                                   ended_early=failure is not None),
+                        time.perf_counter() - started, log.steps, failure,
                         None if loop.flying else float(loop.failure_time))
 
 
@@ -249,7 +257,7 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
     loop = ClosedLoop(controller, simulator, lambda t: _stacked([path.sample(t) for path in paths]), substeps,
                       rules, observe=through_odometry)
     slopes = controller.surface_slopes()
-    recorders = [FlightRecorder() for _ in trajectories]
+    logs = [FlightLog(rules.settle_time, params.F_min, params.F_max) for _ in trajectories]
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     freeze_long_lived_objects()
@@ -260,7 +268,7 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
                 raise KeyboardInterrupt(f'stopped after {k} control steps')
             flying = loop.flying.copy()
             done = loop.step()
-            out, reference, truth = done.output, done.reference, done.truth
+            out, reference = done.output, done.reference
             axes = list(out.axes.values())
             odometries = [_vehicle(done.observation, v) for v in range(count)]
             with deferred():     # the step's messages of every vehicle, whole
@@ -274,8 +282,8 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
                                                         [_vehicle(a.equivalent, v) for a in axes],
                                                         [_vehicle(a.corrective, v) for a in axes])
                     position, yaw = _vehicle(reference.position, v), _vehicle(reference.yaw, v)
-                    recorders[v].append(done.time, _vehicle(truth[:3], v), _vehicle(truth[PSI], v), position, yaw,
-                                        forces, controls, surfaces, equivalent, corrective)
+                    logs[v].add(done.time, state_from_odometry(odometries[v]), position, yaw, forces, controls,
+                                surfaces, equivalent, corrective)
                     if bag is not None:
                         bag.vehicles[v].record_step(odometries[v], forces, controls, position, yaw, surfaces,
                                                     equivalent, corrective, slopes)
@@ -284,7 +292,8 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
             if progress and (k + 1) % report_every == 0:
                 print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
     wall = time.perf_counter() - started
-    return [FlightResult(recorder.record(), wall, len(recorder.rows),
-                         None if loop.failure[v] < 0 else FAILURES[loop.failure[v]],
-                         None if loop.failure[v] < 0 else float(loop.failure_time[v]))
-            for v, recorder in enumerate(recorders)]
+    failures = [None if loop.failure[v] < 0 else FAILURES[loop.failure[v]] for v in range(count)]
+    return [FlightResult(log.flight(params, label=controller_kind, custom_data={'controller': controller_kind},
+                                    ended_early=failure is not None), wall, log.steps, failure,
+                         None if failure is None else float(loop.failure_time[v]))
+            for v, (log, failure) in enumerate(zip(logs, failures))]

@@ -10,17 +10,19 @@ from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 
-def build_summary(record: FlightRecord, *, backend: str, controller: str, scenario: str, seed: int,
+def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str, scenario: str, seed: int,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
                   physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None) -> dict:
-    """Metrics of the flight plus everything needed to reproduce it.
+    """Metrics of the flight (its metrics dict, e.g. ``Flight.metrics()``, or a FlightRecord to compute them
+    from) plus everything needed to reproduce it.
 
     ``flight_ok`` is false when the flight ended early (``failure``: why, see
     flight_stack.closed_loop.FAILURES), a state or force went non-finite or the largest position
     error after the settling window exceeds ``max_error`` [m]; ``failures`` says which.
     """
-    metrics = flight_metrics(record, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
-                             ended_early=failure is not None)
+    metrics = flight if isinstance(flight, dict) else flight_metrics(
+        flight, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
+        ended_early=failure is not None)
     sim_time = metrics['duration_s']
     failures = [] if failure is None else [f'the flight ended early: {failure}']
     if not metrics['all_finite']:

@@ -224,9 +224,18 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
     that ``ended_early`` (failed) before two settled steps has NaN tracking figures; any other flight
     that short is refused (ValueError).
     """
-    stats = record_statistics(record, settle_time, f_min, f_max)
+    return metrics_from_statistics(
+        record_statistics(record, settle_time, f_min, f_max), settle_time,
+        bool(np.isfinite(record.forces).all() and np.isfinite(record.position).all()),
+        fuzzy_share(record, share_window) if fuzzy_term else None, share_window, ended_early=ended_early)
+
+
+def metrics_from_statistics(stats: TrackingStatistics, settle_time: float, all_finite: bool,
+                            shares: dict | None, share_window: float = SHARE_WINDOW, ended_early: bool = False) -> dict:
+    """The figures of :func:`flight_metrics` from a flight's statistics (of a record, or summed step by step),
+    whether its forces and positions were all finite and its fuzzy shares (None: no fuzzy term)."""
     if stats.settled_steps < 2 and not ended_early:
-        duration = record.time[-1] - record.time[0]
+        duration = stats.last_time - stats.first_time
         raise ValueError(f'the flight of {duration:.3f} s is not longer than the settling window of {settle_time:g} s; '
                          f'pass a settle time below {duration:.3f} s (e.g. --settle-time '
                          f'{default_settle_time(duration):.3g})')
@@ -236,15 +245,15 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
                     for key, value in tracking.items()}
     return {
         'settle_time_s': float(settle_time),
-        'duration_s': float(record.time[-1] - record.time[0]),
-        'control_steps': int(len(record.time)),
+        'duration_s': float(stats.last_time - stats.first_time),
+        'control_steps': int(stats.steps),
         'rmse_position_m': float(tracking['rmse_position_m']),
         'max_position_error_m': float(tracking['max_position_error_m']),
         'rmse_yaw_rad': float(tracking['rmse_yaw_rad']),
         'chattering': {name: float(value) for name, value in tracking['chattering'].items()},
         'saturation_fraction': float(tracking['saturation_fraction']),
         'saturation_fraction_whole_flight': float(tracking['saturation_fraction_whole_flight']),
-        'all_finite': bool(np.isfinite(record.forces).all() and np.isfinite(record.position).all()),
+        'all_finite': bool(all_finite),
         'fuzzy_share_window_s': float(share_window),
-        'fuzzy_share': fuzzy_share(record, share_window) if fuzzy_term else None,
+        'fuzzy_share': shares,
     }
