@@ -416,28 +416,32 @@ def summarize(flown: Flown, plan, backend: str) -> dict:
 
 
 def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = False, vehicle=None, gains=None,
-               **settings) -> dict:
-    """One embedded flight without the command line (flight_stack.api.fly): its summary; with ``out``
-    the run is written there as the command writes it. ParameterError before flying on a bad setting."""
+               **settings):
+    """One embedded flight without the command line (flight_stack.api.fly): its Flight, with the summary in
+    ``flight.summary``; with ``out`` the run is written there as the command writes it. ParameterError before
+    flying on a bad setting."""
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
     from flight_stack.summary import write_summary
     plan = plan_flight(controller, scenario, vehicle_file=vehicle, gains_file=gains, **settings)
     if out is None:
-        return summarize(fly_here(plan, None, None), plan, 'embedded')
+        flown = fly_here(plan, None, None)
+        flown.data.summary = summarize(flown, plan, 'embedded')
+        return flown.data
     out = Path(out)
     output = RunOutput(out, out / 'bag', overwrite)
     output.create()
     try:
         flown = fly_here(plan, output.bag, out / 'bag')
-        summary = summarize(flown, plan, 'embedded')
-        write_summary(summary, output.out)
+        flown.data.summary = summarize(flown, plan, 'embedded')
+        write_summary(flown.data.summary, output.out)
         review_now(flown, plan, output.out)
-        output.commit()
+        with deferred():
+            output.commit()
     except BaseException:
         output.keep_partial()
         raise
-    return summary
+    return flown.data
 
 
 def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, live_server=None,

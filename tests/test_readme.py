@@ -23,6 +23,9 @@ def test_the_readme_api_example_runs_verbatim_and_prints_forces_and_an_rmse():
     assert forces[0] == forces[2] and forces[1] == forces[3]      # level, on the vertical: no torque asked
     lines = printed.getvalue().splitlines()
     assert lines[0] == str(forces)
-    rmse = namespace['summary']['rmse_position_m']
+    flight = namespace['flight']
+    rmse = flight.summary['rmse_position_m']
     assert lines[1] == f'RMSE {100 * rmse:.2f} cm'
     assert 0.0 < rmse < 0.01
+    assert lines[2] == '(10000,) (10000, 12) (10000, 4)'
+    assert rmse == flight.metrics()['rmse_position_m']

@@ -7,8 +7,8 @@ term and the fuzzy (corrective) term. ``flight_stack.api.fly`` returns one;
 :func:`quad_msgs_bridge.review.flight_from_bag.read_flight` reads one from any bag with the contract
 topics, so "fly, then analyse" and "read a bag, then analyse" are the same code.
 
-Memory: a :class:`FlightLog` keeps every control step up to ``max_rows`` rows (:data:`MAX_ROWS`,
-4.4 minutes at 1 kHz, 92 MB); when it is full it drops every other row and keeps every second step
+Memory: a :class:`FlightLog` keeps every control step up to ``max_rows`` rows (:data:`MAX_ROWS`:
+65.5 s at 1 kHz, 23 MB); when it is full it drops every other row and keeps every second step
 from then on, then every fourth, and so on. So the rows are always the steps whose index is a
 multiple of ``stride`` (step 0 first) and memory stays bounded however long the flight. The
 metrics (``summary.json``, the review's table) never come from dropped rows: the log also sums
@@ -30,7 +30,7 @@ from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, FlightRec
 from quad_msgs_bridge.state import PSI, STATE_NAMES, STATE_SIZE
 from quad_msgs_bridge.vehicle_params import VehicleParams
 
-MAX_ROWS = 1 << 18      #: rows a flight keeps at most before it thins them out (see the module doc)
+MAX_ROWS = 1 << 16      #: rows a flight keeps at most before it thins them out (see the module doc)
 
 #: the time series of a flight: name -> (columns, unit of each column)
 SERIES = {
