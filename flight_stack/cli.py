@@ -217,7 +217,8 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
         with closed_whole(recording) as written:
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
                                   plan.duration, plan.physics_rate, progress=progress, bag=written,
-                                  sinks=sinks, rules=FailureRules(plan.settle_time, max_error=math.inf))
+                                  sinks=sinks, perturbations=plan.perturbations,
+                                  rules=FailureRules(plan.settle_time, max_error=math.inf))
             for sink in sinks:
                 sink.close()
     flight = result.flight
@@ -423,7 +424,10 @@ def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = Fa
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
     from flight_stack.summary import write_summary
+    from quad_msgs_bridge.vehicle_params import ParameterError
     plan = plan_flight(controller, scenario, vehicle_file=vehicle, gains_file=gains, **settings)
+    if out is not None and not isinstance(out, (str, Path)):
+        raise ParameterError(f'out: expected a folder path, got {out!r}')
     if out is None:
         flown = fly_here(plan, None, None)
         flown.data.summary = summarize(flown, plan, 'embedded')

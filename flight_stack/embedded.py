@@ -28,6 +28,7 @@ from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.model import QuadrotorModel
 from quad_sim.perturbations.actuation import MotorLag, TransportDelay
 from quad_sim.perturbations.sensor_noise import SensorNoise
+from quad_sim.perturbations.vehicle_change import VehicleChange
 from quad_sim.perturbations.wind import Wind
 from quad_sim.simulator import Simulator
 from nnit2fsmc_controller.factory import build_controller
@@ -46,6 +47,7 @@ class Perturbations:
     delay: TransportDelay | None = None
     motor_lag: MotorLag | None = None
     wind: Wind | None = None
+    changes: tuple[VehicleChange, ...] = ()     #: the true vehicle changing mid-flight (payload, rotor loss)
 
 
 @dataclass
@@ -171,7 +173,7 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     substeps = physics_substeps(controller.dt, physics_rate)
     model = QuadrotorModel(perturbations.true_vehicle or params, disturbances)
     simulator = Simulator(model, 1.0 / physics_rate, trajectory.initial_state,
-                          motor_lag=perturbations.motor_lag, wind=perturbations.wind)
+                          motor_lag=perturbations.motor_lag, wind=perturbations.wind, changes=perturbations.changes)
     loop = ClosedLoop(controller, simulator, setpoints.sample, substeps, rules,
                       sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, observe=through_odometry)
     log = FlightLog(rules.settle_time, params.F_min, params.F_max)
