@@ -75,7 +75,7 @@ def test_to_pandas_gives_one_column_per_series(flown_with_bag):
     pandas = pytest.importorskip('pandas', reason='pandas is not installed (requirements-test.txt pins it)')
     flown, _ = flown_with_bag
     frame = flown.to_pandas()
-    assert frame.shape == (3000, 47) and list(frame.columns) == list(flown.columns())
+    assert frame.shape == (3000, 43) and list(frame.columns) == list(flown.columns())
     assert np.array_equal(frame['U4'].to_numpy(), flown.controls[:, 3])
 
 
