@@ -72,7 +72,7 @@ def test_to_pandas_says_how_to_get_pandas_when_it_is_missing(flown_with_bag, mon
 
 
 def test_to_pandas_gives_one_column_per_series(flown_with_bag):
-    pandas = pytest.importorskip('pandas', reason='pandas is not installed (requirements-test.txt pins it)')
+    pytest.importorskip('pandas', reason='pandas is not installed (requirements-test.txt pins it)')
     flown, _ = flown_with_bag
     frame = flown.to_pandas()
     assert frame.shape == (3000, 43) and list(frame.columns) == list(flown.columns())

@@ -2,14 +2,13 @@
 
 A :class:`FlightRecord` holds, per control step, what the contract topics carry: the odometry the
 controller answered, the reference for that instant, the rotor thrusts and U1..U4 it sent, and the
-per-subsystem diagnostics. The live backends fill it step by step; the bag review rebuilds it from
-the recorded topics. :func:`flight_metrics` turns either into the numbers of ``summary.json``.
+per-subsystem diagnostics (a :class:`~quad_msgs_bridge.review.flight_data.Flight`, flown or read from
+a bag, gives one). :func:`flight_metrics` turns it into the numbers of ``summary.json``.
 """
 from __future__ import annotations
 
-import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,27 +49,6 @@ class FlightRecord:
     surfaces: np.ndarray             #: (N, 6) sliding surfaces S per subsystem
     equivalent: np.ndarray           #: (N, 6) NN (or model) equivalent-control term per subsystem
     corrective: np.ndarray           #: (N, 6) fuzzy (or switching) corrective term per subsystem
-
-
-@dataclass
-class FlightRecorder:
-    """Collects one row per control step (cheap appends) and hands out a :class:`FlightRecord`."""
-
-    rows: list = field(default_factory=list)
-
-    def append(self, t: float, position, yaw: float, reference_position, reference_yaw: float,
-               forces, controls, surfaces, equivalent, corrective) -> None:
-        self.rows.append((t, position, yaw, reference_position, reference_yaw,
-                          forces, controls, surfaces, equivalent, corrective))
-
-    def record(self) -> FlightRecord:
-        if not self.rows:
-            raise ValueError('no control step was recorded')
-        count = len(self.rows)
-        return FlightRecord(*(np.asarray(column, dtype=float) if not isinstance(column[0], (tuple, list)) else
-                              np.fromiter(itertools.chain.from_iterable(column), dtype=float,
-                                          count=count * len(column[0])).reshape(count, -1)
-                              for column in zip(*self.rows)))
 
 
 def fuzzy_share(record: FlightRecord, window: float) -> dict[str, list[float]]:
