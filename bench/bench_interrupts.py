@@ -16,7 +16,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path[:0] = [str(ROOT / 'tests')]
+sys.path[:0] = [str(ROOT / 'tests'), str(ROOT)] + [str(ROOT / 'ros2_ws' / 'src' / package) for package in
+                                                  ('quad_msgs_bridge', 'quad_sim', 'nnit2fsmc_controller')]
 from test_interrupt_phases import PHASES, Run, earlier_run  # noqa: E402
 
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
+import os
 import sys
 import tempfile
 from dataclasses import dataclass, field
@@ -324,10 +325,10 @@ def main(argv: list[str] | None = None) -> int:
     """``run_stack.py`` (and the ``nnit2fsmc-stack`` command): a flight, or a bag tool; the exit status."""
     try:
         with stop_signals():
-            return run(sys.argv[1:] if argv is None else argv)
+            code = run(sys.argv[1:] if argv is None else argv)
     except KeyboardInterrupt:
         print('interrupted', file=sys.stderr)
-        return 130
+        code = 130
     except ModuleNotFoundError as error:
         top = (error.name or '').split('.')[0]
         if top not in DEPENDENCIES:
@@ -337,6 +338,11 @@ def main(argv: list[str] | None = None) -> int:
               '  .venv), or .venv/bin/python run_stack.py [OPTIONS] once `bash scripts/setup_venv.sh .venv\n'
               '  requirements.txt` made it; or install the stack: pip install .', file=sys.stderr)
         return 2
+    if code == 130 and argv is None:   # the command was stopped: everything it wrote is closed by now, so end
+        sys.stdout.flush()             # the process at once (the interpreter's own teardown of numba and
+        sys.stderr.flush()             # matplotlib takes about a second more)
+        os._exit(130)
+    return code
 
 
 def run(argv: list[str]) -> int:
