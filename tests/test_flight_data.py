@@ -145,9 +145,10 @@ def peak_rss_kb(duration: float, out: Path, bag: bool) -> int:
 @pytest.mark.parametrize('bag', [False, True], ids=['no bag', 'bag'])
 def test_the_memory_of_a_flight_does_not_grow_with_its_length(tmp_path, bag):
     """Before, a flight cost about 2.5 MB per simulated second (a 600 s flight peaked at 1.5 GB). Now the rows
-    stop growing at MAX_ROWS (65.5 s at 1 kHz): from 80 s to 200 s of flight, the peak grows by less than
-    50 kB per simulated second (a bound 50 times below the old cost; the rows alone would add 344 kB/s)."""
-    short, long = 80.0, 200.0
+    stop growing at MAX_ROWS (65.5 s at 1 kHz): flights of 80 s and 160 s both keep 40,000 rows (every 2nd and
+    every 4th step), and from the one to the other the peak grows by less than 50 kB per simulated second (a
+    bound 50 times below the old cost; rows kept at every step would add 344 kB/s)."""
+    short, long = 80.0, 160.0
     rss_short = peak_rss_kb(short, tmp_path / 'short', bag)
     rss_long = peak_rss_kb(long, tmp_path / 'long', bag)
     growth = (rss_long - rss_short) / (long - short)
