@@ -89,7 +89,7 @@ PARTS = (
     ('perturbations/actuation.py', None, 'perturbations: delay, motor lag'),
     ('flight_stack/embedded.py', 'through_odometry', 'measurement: odometry round trip'),
     ('quad_msgs_bridge/reference.py', None, 'setpoint sampling'),
-    ('quad_msgs_bridge/review/metrics.py', 'FlightRecorder.record', 'bookkeeping: flight record at the end'),
+    ('quad_msgs_bridge/review/flight_data.py', None, 'bookkeeping: flight record (FlightLog)'),
     ('quad_msgs_bridge/review/metrics.py', None, 'bookkeeping: statistics, record rows'),
     ('flight_stack/closed_loop.py', 'ClosedLoop._check', 'bookkeeping: failure check'),
     ('flight_stack/closed_loop.py', None, 'bookkeeping: loop step'),

@@ -1,7 +1,7 @@
 """The flight stack as a Python library: a few stable names for people who bring their own simulator,
 their own vehicle, or want a flight or a campaign from a script.
 
-    from flight_stack.api import make_controller, hold, fly, run_campaign
+    from flight_stack.api import make_controller, hold, fly, read_flight, run_campaign
 
 Conventions (the paper's, REP 103):
 
@@ -30,11 +30,13 @@ from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, load_gai
 from nnit2fsmc_controller.se3 import SE3Controller
 from nnit2fsmc_controller.trajectory import SCENARIOS
 from quad_msgs_bridge.reference import ReferenceSample as Reference, hold
+from quad_msgs_bridge.review.flight_data import Flight
+from quad_msgs_bridge.review.flight_from_bag import read_flight
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
 
-__all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'ParameterError', 'Reference',
-           'SE3Controller', 'VehicleParams', 'fly', 'hold', 'load_gains', 'load_vehicle', 'make_controller',
-           'run_campaign']
+__all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'Flight', 'ParameterError',
+           'Reference', 'SE3Controller', 'VehicleParams', 'fly', 'hold', 'load_gains', 'load_vehicle',
+           'make_controller', 'read_flight', 'run_campaign']
 
 
 def load_vehicle(path: str | Path | None = None) -> VehicleParams:
@@ -56,19 +58,41 @@ def make_controller(kind: str = 'nnit2fsmc', vehicle: VehicleParams | str | Path
 
 
 def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
-        disturbances: bool | None = None, seed: int = 0, vehicle: str | Path | None = None,
+        disturbances: bool | None = None, seed: int = 0, vehicle: VehicleParams | str | Path | None = None,
         gains: str | Path | None = None, physics_rate: float = 1000.0, settle_time: float | None = None,
-        max_error: float = 1.0, out: str | Path | None = None, overwrite: bool = False) -> dict:
-    """Fly a whole scenario on the embedded backend (no ROS) and return its summary (the content of
-    ``summary.json``: rmse_position_m, max_position_error_m, rmse_yaw_rad, chattering, ...).
+        max_error: float = 1.0, out: str | Path | None = None, overwrite: bool = False,
+        true_vehicle: VehicleParams | str | Path | None = None, wind: Mapping | None = None,
+        sensor_noise: Mapping | None = None, delay_s: float = 0.0, motor_time_constant_s: float = 0.0,
+        mass_change: Mapping | None = None, rotor_efficiency_loss: Mapping | None = None) -> Flight:
+    """Fly a whole scenario on the embedded backend (no ROS) and return the :class:`Flight`: its time
+    series as numpy arrays with units (``time``, ``state``, ``reference_position``, ``forces``,
+    ``controls``, ``surfaces``, ``equivalent``, ``corrective``; ``to_pandas()``), ``metrics()``, and
+    ``summary``, the content of ``summary.json`` (rmse_position_m, max_position_error_m, chattering, ...).
 
-    With ``out`` the run is written as ``run_stack.py --out`` writes it (summary, bag, review);
-    without it nothing is written. Raises ParameterError before flying on any invalid setting.
+    ``vehicle`` is the controller's nominal model (a VehicleParams or a vehicle YAML; None: the packaged
+    one). The world, as a campaign spec's keys of the same names mean it (docs/CAMPAIGNS.md), checked by
+    the same code:
+
+    * ``true_vehicle``: the vehicle the simulator flies (VehicleParams or YAML; None: the nominal one);
+    * ``wind``: ``{mean_speed_mps: 3.0, turbulence: moderate, direction_deg: 90}`` (Dryden turbulence
+      none | light | moderate | severe; without ``direction_deg`` a direction drawn from ``seed``);
+    * ``sensor_noise``: ``{position_m: 0.01, velocity_mps: 0.02, attitude_rad: 0.01, body_rate_radps: 0.02}``
+      (white-noise standard deviations, or ``{std: s, bias_std: b}``);
+    * ``delay_s`` [s] (whole control steps) and ``motor_time_constant_s`` [s] (first-order motor lag);
+    * ``mass_change``: ``{at_s: 20.0, mass_kg: 1.3}``, a payload picked up or dropped at sim time at_s;
+    * ``rotor_efficiency_loss``: ``{at_s: 10.0, loss: [0.2, 0, 0, 0]}``, lost thrust fractions of F1..F4
+      from at_s on.
+
+    With ``out`` the run is written as ``run_stack.py --out`` writes it (summary, bag, review), and
+    ``read_flight(out / 'bag')`` gives the same flight back; without it nothing is written. Raises
+    ParameterError (a ValueError) naming the argument before flying on any invalid setting.
     """
     from .cli import run_flight
     return run_flight(controller, scenario, duration=duration, disturbances=disturbances, seed=seed,
                       vehicle=vehicle, gains=gains, physics_rate=physics_rate, settle_time=settle_time,
-                      max_error=max_error, out=out, overwrite=overwrite)
+                      max_error=max_error, out=out, overwrite=overwrite, true_vehicle=true_vehicle, wind=wind,
+                      sensor_noise=sensor_noise, delay_s=delay_s, motor_time_constant_s=motor_time_constant_s,
+                      mass_change=mass_change, rotor_efficiency_loss=rotor_efficiency_loss)
 
 
 def run_campaign(spec: str | Path, out: str | Path, *, flights: int | None = None, seed: int | None = None,

@@ -35,11 +35,13 @@ from __future__ import annotations
 import argparse
 import contextlib
 import math
-import signal
+import os
 import sys
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from flight_stack.interrupts import deferred, stop_signals
 
 #: third-party modules the stack imports -> the distribution that provides them
 DEPENDENCIES = {'numpy': 'numpy', 'numba': 'numba', 'yaml': 'PyYAML', 'rosbags': 'rosbags', 'mcap': 'mcap', 'zstandard': 'zstandard',
@@ -110,24 +112,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-@contextlib.contextmanager
-def stop_signals():
-    """SIGINT (Ctrl-C) and SIGTERM, noted rather than raised: yields ``stop()``, true once one came.
-
-    The embedded flight checks it between two control steps, so a signal never lands in the
-    middle of a message being added to the bag (a KeyboardInterrupt there once left a message
-    counted in the bag's index that was not in its chunk).
-    """
-    received: list[int] = []
-    previous = {number: signal.signal(number, lambda signum, frame: received.append(signum))
-                for number in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield lambda: bool(received)
-    finally:
-        for number, handler in previous.items():
-            signal.signal(number, handler)
-
-
 def choose_backend(requested: str, live: bool) -> str:
     if requested != 'auto':
         return requested
@@ -188,6 +172,22 @@ def live_sinks(server, params, topics, speed_factor: float) -> list:
     return ([Pacer(speed_factor)] if speed_factor > 0.0 else []) + [LiveView(server, params, topics=topics)]
 
 
+@contextlib.contextmanager
+def closed_whole(recording):
+    """``with recording`` whose closing (a bag's summary and metadata) a stop signal does not cut."""
+    with deferred():
+        entered = recording.__enter__()
+    try:
+        yield entered
+    except BaseException as error:
+        with deferred():
+            if not recording.__exit__(type(error), error, error.__traceback__):
+                raise
+    else:
+        with deferred():
+            recording.__exit__(None, None, None)
+
+
 class FlightStopped(Exception):
     """The flight did not finish; the message says why, ``code`` is the exit status."""
 
@@ -198,11 +198,11 @@ class FlightStopped(Exception):
 
 @dataclass
 class Flown:
-    """A finished flight: its record, for the summary, and (with a bag) the flight to review."""
+    """A finished flight: its data (time series and metrics, for the summary) and, with a bag, the flight to review."""
 
-    record: object                  #: quad_msgs_bridge.review.metrics.FlightRecord
+    data: object                    #: quad_msgs_bridge.review.flight_data.Flight
     wall_time_s: float
-    flight: object = None           #: quad_msgs_bridge.review.flight_from_bag.BagFlight, None without a bag
+    flight: object = None           #: the same Flight when it has a bag to review; None without a bag
     extra: dict = field(default_factory=dict)
     failure: str | None = None      #: why the flight ended early (flight_stack.closed_loop.FAILURES), if it did
     failure_time_s: float | None = None   #: [s] sim time at which it failed
@@ -210,31 +210,32 @@ class Flown:
 
 def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_server=None,
              speed_factor: float = 0.0, live_wait: bool = False) -> Flown:
-    """The embedded backend; with ``bag``, the flight to review is the record in memory (what the bag holds)."""
+    """The embedded backend; with ``bag``, the flight to review is the one in memory (what the bag holds)."""
     from flight_stack.closed_loop import FailureRules
     from flight_stack.embedded import fly_embedded
     from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
-    from quad_msgs_bridge.review.flight_from_bag import BagFlight
 
-    with stop_signals() as stop, live_server or contextlib.nullcontext():
+    with stop_signals(), live_server or contextlib.nullcontext():
         sinks = live_sinks(live_server, plan.params, plan.topics, speed_factor) if live_server else []
         if live_server and live_wait:
             print('live view: waiting for a client to subscribe (Ctrl-C to stop)', flush=True)
-            if not live_server.wait_for_subscriber(stop):
-                raise KeyboardInterrupt('stopped before the flight')
-        recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
-                                      controller=plan.controller, scenario=plan.scenario, backend='embedded',
-                                      seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled))
-                     if bag else contextlib.nullcontext())
-        with recording as written:
+            live_server.wait_for_subscriber(lambda: False)   # a stop signal raises KeyboardInterrupt meanwhile
+        with deferred():
+            recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
+                                          controller=plan.controller, scenario=plan.scenario, backend='embedded',
+                                          seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled))
+                         if bag else contextlib.nullcontext())
+        with closed_whole(recording) as written:
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
-                                  plan.duration, plan.physics_rate, progress=progress, bag=written, stop=stop,
-                                  sinks=sinks, rules=FailureRules(plan.settle_time, max_error=math.inf))
+                                  plan.duration, plan.physics_rate, progress=progress, bag=written,
+                                  sinks=sinks, perturbations=plan.perturbations,
+                                  rules=FailureRules(plan.settle_time, max_error=math.inf))
             for sink in sinks:
                 sink.close()
-    flight = (BagFlight(bag_shown, plan.controller, result.record, plan.params, plan.settle_time,
-                        dict(written.writer.custom_data), ended_early=result.failure is not None) if bag else None)
-    return Flown(result.record, result.wall_time_s, flight, failure=result.failure,
+    flight = result.flight
+    if bag:
+        flight.path, flight.custom_data = bag_shown, dict(written.writer.custom_data)
+    return Flown(flight, result.wall_time_s, flight if bag else None, failure=result.failure,
                  failure_time_s=result.failure_time_s)
 
 
@@ -246,26 +247,28 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
     from flight_stack.fleet import fleet_layout
     from nnit2fsmc_controller.trajectory import make_scenario
     from quad_msgs_bridge.bag.flight_bag import FleetBag, disturbances_label, vehicle_custom_data
-    from quad_msgs_bridge.review.flight_from_bag import BagFlight
 
     vehicles = fleet_layout(args.vehicles, args.namespace)
     trajectories = [make_scenario(plan.scenario, plan.duration, offset=vehicle.offset) for vehicle in vehicles]
-    with stop_signals() as stop:
-        recording = (FleetBag.create(bag, plan.params, plan.settle_time, [v.namespace for v in vehicles],
-                                     topics=plan.topics, controller=plan.controller, scenario=plan.scenario,
-                                     backend='embedded', seed=plan.seed,
-                                     disturbances=disturbances_label(plan.disturbances.enabled))
-                     if bag else contextlib.nullcontext())
-        with recording as written:
+    with stop_signals():
+        with deferred():
+            recording = (FleetBag.create(bag, plan.params, plan.settle_time, [v.namespace for v in vehicles],
+                                         topics=plan.topics, controller=plan.controller, scenario=plan.scenario,
+                                         backend='embedded', seed=plan.seed,
+                                         disturbances=disturbances_label(plan.disturbances.enabled))
+                         if bag else contextlib.nullcontext())
+        with closed_whole(recording) as written:
             results = fly_fleet(plan.controller, trajectories, plan.params, plan.disturbances, plan.gains,
-                                plan.duration, plan.physics_rate, progress=not args.quiet, bag=written, stop=stop,
+                                plan.duration, plan.physics_rate, progress=not args.quiet, bag=written,
                                 rules=FailureRules(plan.settle_time, max_error=math.inf))
     flights = []
     for vehicle, result in zip(vehicles, results):
-        flight = (BagFlight(bag_shown, vehicle.namespace, result.record, plan.params, plan.settle_time,
-                            vehicle_custom_data(written.writer.custom_data, vehicle.namespace),
-                            ended_early=result.failure is not None) if bag else None)
-        flights.append((vehicle.namespace, Flown(result.record, result.wall_time_s, flight,
+        flight = result.flight
+        flight.label = vehicle.namespace
+        if bag:
+            flight.path = bag_shown
+            flight.custom_data = vehicle_custom_data(written.writer.custom_data, vehicle.namespace)
+        flights.append((vehicle.namespace, Flown(flight, result.wall_time_s, flight if bag else None,
                                                  {'offset_m': list(vehicle.offset)}, failure=result.failure,
                                                  failure_time_s=result.failure_time_s)))
     return flights
@@ -304,7 +307,7 @@ def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str,
         extra = {'ros': {'namespace': vehicle.namespace, 'mode': args.mode,
                          'simulator': result.sim_report.split('] ')[-1], 'timing': timing},
                  **({'offset_m': list(vehicle.offset)} if len(vehicles) > 1 else {})}
-        flights.append((vehicle.namespace, Flown(flight.record, result.wall_time_s, flight if bag_shown else None,
+        flights.append((vehicle.namespace, Flown(flight, result.wall_time_s, flight if bag_shown else None,
                                                  extra)))
     return flights
 
@@ -334,7 +337,11 @@ def review_now(flown: Flown, plan, out: Path) -> tuple[list[str], str | None]:
 def main(argv: list[str] | None = None) -> int:
     """``run_stack.py`` (and the ``nnit2fsmc-stack`` command): a flight, or a bag tool; the exit status."""
     try:
-        return run(sys.argv[1:] if argv is None else argv)
+        with stop_signals():
+            code = run(sys.argv[1:] if argv is None else argv)
+    except KeyboardInterrupt:
+        print('interrupted', file=sys.stderr)
+        code = 130
     except ModuleNotFoundError as error:
         top = (error.name or '').split('.')[0]
         if top not in DEPENDENCIES:
@@ -344,6 +351,11 @@ def main(argv: list[str] | None = None) -> int:
               '  .venv), or .venv/bin/python run_stack.py [OPTIONS] once `bash scripts/setup_venv.sh .venv\n'
               '  requirements.txt` made it; or install the stack: pip install .', file=sys.stderr)
         return 2
+    if code == 130 and argv is None:   # the command was stopped: everything it wrote is closed by now, so end
+        sys.stdout.flush()             # the process at once (the interpreter's own teardown of numba and
+        sys.stderr.flush()             # matplotlib takes about a second more)
+        os._exit(130)
+    return code
 
 
 def run(argv: list[str]) -> int:
@@ -360,6 +372,8 @@ def run(argv: list[str]) -> int:
         from flight_stack.campaign.cli import main as campaign_main
         return campaign_main(argv[1:])
     args = parse_args(argv)
+    if not args.quiet:
+        print('planning the flight', flush=True)
     from flight_stack.fleet import MAX_VEHICLES
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
@@ -413,7 +427,7 @@ def unfinished(output, message: str, code: int) -> int:
 def summarize(flown: Flown, plan, backend: str) -> dict:
     """The summary of a flown flight (metrics, outcome, settings)."""
     from flight_stack.summary import build_summary
-    summary = build_summary(flown.record, backend=backend, controller=plan.controller, scenario=plan.scenario,
+    summary = build_summary(flown.data.metrics(), backend=backend, controller=plan.controller, scenario=plan.scenario,
                             seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
                             disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
                             wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure,
@@ -423,28 +437,35 @@ def summarize(flown: Flown, plan, backend: str) -> dict:
 
 
 def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = False, vehicle=None, gains=None,
-               **settings) -> dict:
-    """One embedded flight without the command line (flight_stack.api.fly): its summary; with ``out``
-    the run is written there as the command writes it. ParameterError before flying on a bad setting."""
+               **settings):
+    """One embedded flight without the command line (flight_stack.api.fly): its Flight, with the summary in
+    ``flight.summary``; with ``out`` the run is written there as the command writes it. ParameterError before
+    flying on a bad setting."""
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
     from flight_stack.summary import write_summary
+    from quad_msgs_bridge.vehicle_params import ParameterError
     plan = plan_flight(controller, scenario, vehicle_file=vehicle, gains_file=gains, **settings)
+    if out is not None and not isinstance(out, (str, Path)):
+        raise ParameterError(f'out: expected a folder path, got {out!r}')
     if out is None:
-        return summarize(fly_here(plan, None, None), plan, 'embedded')
+        flown = fly_here(plan, None, None)
+        flown.data.summary = summarize(flown, plan, 'embedded')
+        return flown.data
     out = Path(out)
     output = RunOutput(out, out / 'bag', overwrite)
     output.create()
     try:
         flown = fly_here(plan, output.bag, out / 'bag')
-        summary = summarize(flown, plan, 'embedded')
-        write_summary(summary, output.out)
+        flown.data.summary = summarize(flown, plan, 'embedded')
+        write_summary(flown.data.summary, output.out)
         review_now(flown, plan, output.out)
-        output.commit()
+        with deferred():
+            output.commit()
     except BaseException:
         output.keep_partial()
         raise
-    return summary
+    return flown.data
 
 
 def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, live_server=None,
@@ -471,10 +492,17 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
     if len(flights) > 1:
         return report_fleet(flights, plan, backend, output, bag_shown)
     [(_, flown)] = flights
-    summary = summarize(flown, plan, backend)
-    write_summary(summary, output.out)
-    review_lines, report = review_now(flown, plan, output.out) if flown.flight is not None else ([], None)
-    output.commit()
+    try:
+        summary = summarize(flown, plan, backend)
+        write_summary(summary, output.out)
+        if flown.flight is not None and not args.quiet:
+            print('reviewing the flight (report and plots)', file=sys.stderr, flush=True)
+        review_lines, report = review_now(flown, plan, output.out) if flown.flight is not None else ([], None)
+        with deferred():
+            output.commit()
+    except KeyboardInterrupt:
+        return unfinished(output, 'interrupted' + (f' after the flight; bag closed: {output.bag}' if output.bag else ''),
+                          130)
     print(format_summary(summary))
     print_ros_lines(summary)
     print(f'summary: {output.out_dir / "summary.json"}')

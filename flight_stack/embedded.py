@@ -18,20 +18,23 @@ from typing import Callable, Sequence
 import numpy as np
 
 from quad_msgs_bridge.conversions import rosbags_kit, setpoints_from_msg, setpoints_msg
-from quad_msgs_bridge.bag.flight_bag import FlightBag
-from quad_msgs_bridge.review.metrics import FlightRecord, FlightRecorder
+from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, FAILURE_TIME_KEY, FlightBag
+from quad_msgs_bridge.review.flight_data import Flight, FlightLog
+from quad_msgs_bridge.review.metrics import FlightRecord
 from quad_msgs_bridge.reference import ReferenceSample, SetpointPath
 from quad_msgs_bridge.runtime import freeze_long_lived_objects
-from quad_msgs_bridge.state import PSI, OdometrySample, odometry_from_state, state_from_odometry
+from quad_msgs_bridge.state import OdometrySample, odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.model import QuadrotorModel
 from quad_sim.perturbations.actuation import MotorLag, TransportDelay
 from quad_sim.perturbations.sensor_noise import SensorNoise
+from quad_sim.perturbations.vehicle_change import VehicleChange
 from quad_sim.perturbations.wind import Wind
 from quad_sim.simulator import Simulator
 from nnit2fsmc_controller.factory import build_controller, build_measurement_stage
 
 from .closed_loop import FAILURES, ClosedLoop, FailureRules
+from .interrupts import deferred
 
 
 @dataclass
@@ -44,25 +47,93 @@ class Perturbations:
     delay: TransportDelay | None = None
     motor_lag: MotorLag | None = None
     wind: Wind | None = None
+    changes: tuple[VehicleChange, ...] = ()     #: the true vehicle changing mid-flight (payload, rotor loss)
 
 
 @dataclass
 class FlightResult:
-    record: FlightRecord
+    flight: Flight                     #: the flight's time series (bounded in memory: see flight_data)
     wall_time_s: float
     steps: int
     failure: str | None = None         #: None, or why the flight ended early (one of closed_loop.FAILURES)
     failure_time_s: float | None = None
 
+    @property
+    def record(self) -> FlightRecord:
+        return self.flight.record
+
 
 def published_path(trajectory, setpoint_rate: float) -> SetpointPath:
-    """The setpoint path the trajectory node would publish."""
+    """The setpoint path the trajectory node would publish (the whole path at once: see :class:`SetpointStream`
+    for a flight of any length)."""
     return SetpointPath.sampled(trajectory, 0.0, trajectory.duration, setpoint_rate)
 
 
-def setpoint_path(path: SetpointPath) -> SetpointPath:
-    """``path`` as the controller reads it back from the setpoints message."""
-    return setpoints_from_msg(setpoints_msg(rosbags_kit(), path))
+def setpoint_path(path: SetpointPath, origin: float | None = None) -> SetpointPath:
+    """``path`` as the controller reads it back from the setpoints message (stamped at ``origin`` [s],
+    default: the path's start)."""
+    return setpoints_from_msg(setpoints_msg(rosbags_kit(), path, origin=origin))
+
+
+SETPOINT_WINDOW = 10.0    #: [s] of the path one setpoints message of a :class:`SetpointStream` covers
+
+
+class SetpointStream:
+    """The setpoints of ``trajectory`` over [0, ``duration``] [s], sampled as the flight goes.
+
+    The whole path is ``SetpointPath.sampled(trajectory, 0, duration, rate)``: a sample every 1/rate
+    [s] and one at the end. The stream holds one window of it at a time: ``window`` [s] of samples
+    (neighbouring windows share their boundary sample), made when the flight reaches it and read
+    back from a setpoints message stamped at the path's start, so every sample time is the one of
+    the whole path to the bit and :meth:`sample` gives the reference the whole path gives, at any
+    time. ``on_window(path)`` gets each window as it is made (what the trajectory node publishes
+    then). Memory holds one window, however long the flight.
+    """
+
+    def __init__(self, trajectory, duration: float, rate: float, window: float = SETPOINT_WINDOW,
+                 on_window: Callable[[SetpointPath], None] = lambda path: None):
+        self.trajectory, self.duration, self.rate = trajectory, float(duration), float(rate)
+        count = max(1, int(math.floor(self.duration * self.rate + 1e-9))) + 1   # as SetpointPath.sampled
+        self._last = count if self.duration - (count - 1) / self.rate > 1e-9 else count - 1   #: the end sample
+        self._per_window = max(1, round(window * self.rate))
+        self._windows = -(-self._last // self._per_window)
+        self._on_window = on_window
+        self._index, self._path = -1, None
+
+    def _offset(self, k: int) -> float:
+        """Time [s] of sample k of the whole path."""
+        return self.duration if k == self._last else k / self.rate
+
+    def _window_of(self, t: float) -> int:
+        j = min(self._windows - 1, max(0, int(t * self.rate) // self._per_window))
+        while j > 0 and t < self._offset(j * self._per_window):
+            j -= 1
+        while j < self._windows - 1 and t >= self._offset((j + 1) * self._per_window):
+            j += 1
+        return j
+
+    def sample(self, t: float) -> ReferenceSample:
+        """The reference at sim time t [s] (as the controller reads it from the setpoints)."""
+        if self._path is None or not (self._index == 0 or t >= self._path.start) \
+                or (self._index < self._windows - 1 and t >= self._path.end):
+            self._move_to(self._window_of(t))
+        return self._path.sample(t)
+
+    def _move_to(self, j: int) -> None:
+        first, last = j * self._per_window, min((j + 1) * self._per_window, self._last)
+        offsets = [self._offset(k) for k in range(first, last + 1)]
+        window = SetpointPath(offsets, [self.trajectory.sample(t) for t in offsets])
+        self._index, self._path = j, setpoint_path(window, origin=0.0)
+        self._on_window(window)
+
+
+def flown_custom_data(controller_kind: str, failure: str | None, failure_time: float | None) -> dict:
+    """What a flight just flown knows of itself, under the keys its bag's custom data uses (controller, and
+    why and when [s] it failed, if it did), so that ``Flight.failure`` reads the same from either."""
+    custom = {'controller': controller_kind}
+    if failure is not None:
+        custom.update({FAILURE_KEY: failure, FAILURE_TIME_KEY: repr(failure_time)})
+    return custom
 
 
 def physics_substeps(control_dt: float, physics_rate: float) -> int:
@@ -100,45 +171,57 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     """
     perturbations = perturbations or Perturbations()
     controller = build_controller(controller_kind, params, gains)
-    published = published_path(trajectory, setpoint_rate)
-    setpoints = setpoint_path(published)
+    step_sinks = ([bag] if bag is not None else []) + list(sinks)
+
+    def publish(window: SetpointPath) -> None:
+        with deferred():
+            for sink in step_sinks:
+                sink.record_setpoints(window)
+
+    setpoints = SetpointStream(trajectory, trajectory.duration, setpoint_rate, on_window=publish)
     substeps = physics_substeps(controller.dt, physics_rate)
     model = QuadrotorModel(perturbations.true_vehicle or params, disturbances)
     simulator = Simulator(model, 1.0 / physics_rate, trajectory.initial_state,
-                          motor_lag=perturbations.motor_lag, wind=perturbations.wind)
+                          motor_lag=perturbations.motor_lag, wind=perturbations.wind, changes=perturbations.changes)
     loop = ClosedLoop(controller, simulator, setpoints.sample, substeps, rules,
                       sensor_noise=perturbations.sensor_noise, delay=perturbations.delay, observe=through_odometry,
                       measurement=build_measurement_stage(gains))
-    recorder = FlightRecorder()
+    log = FlightLog(rules.settle_time, params.F_min, params.F_max)
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     freeze_long_lived_objects()
     started = time.perf_counter()
     slopes = controller.surface_slopes()   # the gains do not change during an embedded flight
-    step_sinks = ([bag] if bag is not None else []) + list(sinks)
-    for sink in step_sinks:
-        sink.record_setpoints(published)
+    if progress:
+        print('  compiling the kernels (numba; cached after the first run)', file=sys.stderr, flush=True)
     for k in range(steps):
         if stop is not None and stop():
             raise KeyboardInterrupt(f'stopped after {k} control steps')
         done = loop.step()
+        if progress and k == 0:
+            print(f'  kernels ready in {time.perf_counter() - started:.1f} s; flying', file=sys.stderr, flush=True)
         out, reference, truth = done.output, done.reference, done.truth
         surfaces, equivalent, corrective = [list(field) for field in zip(*out.axes.values())][1:]   # per subsystem
-        recorder.append(done.time, truth[:3], truth[PSI], reference.position, reference.yaw,
-                        out.forces, out.controls, surfaces, equivalent, corrective)
         truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
-        for sink in step_sinks:
-            sink.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
-                             surfaces, equivalent, corrective, slopes, truth=truth_odometry)
+        # the state as the bag gives it back: the odometry read, or ground_truth/odom under sensor noise
+        log.add(done.time, done.measured if truth_odometry is None else state_from_odometry(truth_odometry),
+                reference.position, reference.yaw, out.forces, out.controls, surfaces, equivalent, corrective)
+        with deferred():
+            for sink in step_sinks:
+                sink.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
+                                 surfaces, equivalent, corrective, slopes, truth=truth_odometry)
         if not loop.flying:
             break
         if progress and (k + 1) % report_every == 0:
             print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
     failure = None if loop.flying else FAILURES[loop.failure]
+    failure_time = None if loop.flying else float(loop.failure_time)
     if bag is not None and failure is not None:
-        bag.record_failure(failure, float(loop.failure_time))
-    return FlightResult(recorder.record(), time.perf_counter() - started, len(recorder.rows), failure,
-                        None if loop.flying else float(loop.failure_time))
+        bag.record_failure(failure, failure_time)
+    return FlightResult(log.flight(params, label=controller_kind,
+                                   custom_data=flown_custom_data(controller_kind, failure, failure_time),
+                                   ended_early=failure is not None),
+                        time.perf_counter() - started, log.steps, failure, failure_time)
 
 
 def _stacked(samples: Sequence[ReferenceSample]) -> ReferenceSample:
@@ -174,55 +257,62 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
     """
     count = len(trajectories)
     controller = build_controller(controller_kind, params, gains, batch=count)
-    published = [published_path(trajectory, setpoint_rate) for trajectory in trajectories]
-    paths = [setpoint_path(path) for path in published]
+    def publisher(v: int) -> Callable[[SetpointPath], None]:
+        def publish(window: SetpointPath) -> None:
+            if bag is not None:
+                with deferred():
+                    bag.vehicles[v].record_setpoints(window)
+        return publish
+
+    paths = [SetpointStream(trajectory, trajectory.duration, setpoint_rate, on_window=publisher(v))
+             for v, trajectory in enumerate(trajectories)]
     substeps = physics_substeps(controller.dt, physics_rate)
     start = [np.array(values) for values in zip(*(trajectory.initial_state for trajectory in trajectories))]
     simulator = Simulator(QuadrotorModel(params, disturbances), 1.0 / physics_rate, start)
     loop = ClosedLoop(controller, simulator, lambda t: _stacked([path.sample(t) for path in paths]), substeps,
                       rules, observe=through_odometry, measurement=build_measurement_stage(gains))
     slopes = controller.surface_slopes()
-    recorders = [FlightRecorder() for _ in trajectories]
+    logs = [FlightLog(rules.settle_time, params.F_min, params.F_max) for _ in trajectories]
     steps = int(round(duration / controller.dt))
     report_every = max(1, steps // 10)
     freeze_long_lived_objects()
     started = time.perf_counter()
-    if bag is not None:
-        for vehicle_bag, path in zip(bag.vehicles, published):
-            vehicle_bag.record_setpoints(path)
     with np.errstate(all='ignore'):          # a failing vehicle may overflow before it is frozen
         for k in range(steps):
             if stop is not None and stop():
                 raise KeyboardInterrupt(f'stopped after {k} control steps')
             flying = loop.flying.copy()
             done = loop.step()
-            out, reference, truth = done.output, done.reference, done.truth
+            out, reference = done.output, done.reference
             axes = list(out.axes.values())
             odometries = [_vehicle(done.observation, v) for v in range(count)]
-            if bag is not None:
-                bag.record_shared(odometries)
-            for v in range(count):
-                if not flying[v]:
-                    continue
-                forces, controls = _vehicle(out.forces, v), _vehicle(out.controls, v)
-                surfaces, equivalent, corrective = ([_vehicle(a.surface, v) for a in axes],
-                                                    [_vehicle(a.equivalent, v) for a in axes],
-                                                    [_vehicle(a.corrective, v) for a in axes])
-                position, yaw = _vehicle(reference.position, v), _vehicle(reference.yaw, v)
-                recorders[v].append(done.time, _vehicle(truth[:3], v), _vehicle(truth[PSI], v), position, yaw,
-                                    forces, controls, surfaces, equivalent, corrective)
+            with deferred():     # the step's messages of every vehicle, whole
                 if bag is not None:
-                    bag.vehicles[v].record_step(odometries[v], forces, controls, position, yaw, surfaces,
-                                                equivalent, corrective, slopes)
+                    bag.record_shared(odometries)
+                for v in range(count):
+                    if not flying[v]:
+                        continue
+                    forces, controls = _vehicle(out.forces, v), _vehicle(out.controls, v)
+                    surfaces, equivalent, corrective = ([_vehicle(a.surface, v) for a in axes],
+                                                        [_vehicle(a.equivalent, v) for a in axes],
+                                                        [_vehicle(a.corrective, v) for a in axes])
+                    position, yaw = _vehicle(reference.position, v), _vehicle(reference.yaw, v)
+                    logs[v].add(done.time, state_from_odometry(odometries[v]), position, yaw, forces, controls,
+                                surfaces, equivalent, corrective)
+                    if bag is not None:
+                        bag.vehicles[v].record_step(odometries[v], forces, controls, position, yaw, surfaces,
+                                                    equivalent, corrective, slopes)
             if not loop.flying.any():
                 break
             if progress and (k + 1) % report_every == 0:
                 print(f'  {100 * (k + 1) // steps:3d}%  t = {simulator.time:6.2f} s', file=sys.stderr, flush=True)
     wall = time.perf_counter() - started
-    for v in range(count):
-        if bag is not None and loop.failure[v] >= 0:
-            bag.vehicles[v].record_failure(FAILURES[loop.failure[v]], float(loop.failure_time[v]))
-    return [FlightResult(recorder.record(), wall, len(recorder.rows),
-                         None if loop.failure[v] < 0 else FAILURES[loop.failure[v]],
-                         None if loop.failure[v] < 0 else float(loop.failure_time[v]))
-            for v, recorder in enumerate(recorders)]
+    failures = [None if loop.failure[v] < 0 else FAILURES[loop.failure[v]] for v in range(count)]
+    times = [None if failure is None else float(loop.failure_time[v]) for v, failure in enumerate(failures)]
+    for v, (failure, failure_time) in enumerate(zip(failures, times)):
+        if bag is not None and failure is not None:
+            bag.vehicles[v].record_failure(failure, failure_time)
+    return [FlightResult(log.flight(params, label=controller_kind,
+                                    custom_data=flown_custom_data(controller_kind, failure, failure_time),
+                                    ended_early=failure is not None), wall, log.steps, failure, failure_time)
+            for log, failure, failure_time in zip(logs, failures, times)]

@@ -7,9 +7,9 @@ gains key and its valid range.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 from nnit2fsmc_controller.factory import build_controller, control_period, load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
@@ -17,6 +17,9 @@ from quad_msgs_bridge.bag.flight_bag import select_topics
 from quad_msgs_bridge.contract import TopicSpec
 from quad_msgs_bridge.review.metrics import default_settle_time
 from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams, check_number, load_vehicle_file
+from quad_sim.perturbations.vehicle_change import VehicleChange, vehicle_change
+
+from .embedded import Perturbations
 
 MAX_SEED = 2 ** 31 - 1      #: largest NN seed (a ROS integer parameter of the recorder)
 
@@ -38,6 +41,86 @@ class FlightPlan:
     settle_time: float          #: [s] left out of the metrics
     max_error: float            #: [m] largest position error after settling of a flight that passes
     topics: tuple[TopicSpec, ...]
+    perturbations: Perturbations | None = None   #: the flown world, when it differs from the nominal one
+
+
+#: the keys of fly()'s mid-flight vehicle changes -> (VehicleParams field, how to check the value)
+CHANGE_KEYS = {'mass_change': ('mass_kg', 'm'), 'rotor_efficiency_loss': ('loss', 'rotor_efficiency_loss')}
+
+
+def _vehicle(argument: str, value) -> VehicleParams:
+    """A VehicleParams, or the vehicle of a vehicle YAML path (None: the packaged one)."""
+    if isinstance(value, VehicleParams):
+        return value
+    if value is not None and not isinstance(value, (str, Path)):
+        raise ParameterError(f'{argument}: expected a VehicleParams or a vehicle YAML path, got {value!r}')
+    try:
+        return load_vehicle_file(value)[0]
+    except ParameterError as error:
+        raise ParameterError(f'{argument}: {error}') from error
+
+
+def _changes(true_vehicle: VehicleParams, events: dict) -> tuple[VehicleChange, ...]:
+    """The true vehicle's changes of ``events`` (argument -> {'at_s': t, value key: value}), each applied on
+    top of the earlier ones."""
+    timed = []
+    for argument, event in events.items():
+        key, field_name = CHANGE_KEYS[argument]
+        if not isinstance(event, Mapping):
+            raise ParameterError(f'{argument}: expected a mapping {{at_s: t, {key}: value}}, got {event!r}')
+        for name in event:
+            if name not in ('at_s', key):
+                raise ParameterError(f'{argument}.{name}: unknown key (valid keys: at_s, {key})')
+        for name in ('at_s', key):
+            if name not in event:
+                raise ParameterError(f'{argument}.{name}: missing')
+        value = event[key]
+        if field_name == 'rotor_efficiency_loss':
+            if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != 4:
+                raise ParameterError(f'{argument}.{key}: expected 4 lost fractions in [0, 1) of F1..F4, '
+                                     f'got {value!r}')
+            value = tuple(value)
+        timed.append((check_number(f'{argument}.at_s', event['at_s'], 0.0), argument, field_name, value))
+    changes, vehicle = [], true_vehicle
+    for at_s, argument, field_name, value in sorted(timed, key=lambda event: event[0]):
+        change = vehicle_change(argument, vehicle, at_s, **{field_name: value})
+        vehicle = change.vehicle
+        changes = [c for c in changes if c.at_s != at_s] + [change]    # one time: the later event includes it
+    return tuple(changes)
+
+
+def plan_perturbations(scenario: str, controller: str, seed: int, duration: float, control_rate: float,
+                       physics_rate: float, nominal: VehicleParams, *, true_vehicle=None,
+                       wind: Mapping | None = None, sensor_noise: Mapping | None = None, delay_s: float = 0.0,
+                       motor_time_constant_s: float = 0.0, mass_change: Mapping | None = None,
+                       rotor_efficiency_loss: Mapping | None = None) -> Perturbations | None:
+    """The world of one flight, None when it is the nominal one.
+
+    ``wind``, ``sensor_noise``, ``delay_s`` and ``motor_time_constant_s`` mean what the campaign spec's keys
+    of those names mean and are checked by the same code (``flight_stack.campaign.spec``: a wind without
+    ``direction_deg`` blows in a direction drawn from the flight's stream); the random streams are those of
+    flight 0 of a campaign with seed ``seed``. ``true_vehicle`` (a VehicleParams or a vehicle YAML; None:
+    the nominal one) is what the simulator flies; ``mass_change`` ``{at_s: t, mass_kg: m}`` and
+    ``rotor_efficiency_loss`` ``{at_s: t, loss: [l1, l2, l3, l4]}`` change it from sim time t [s] on.
+    ParameterError names the argument (and its key).
+    """
+    from .campaign.sampling import build_perturbations, sample_conditions
+    from .campaign.spec import parse_spec
+    world = {'wind': wind, 'sensor_noise': sensor_noise, 'delay_s': delay_s,
+             'motor_time_constant_s': motor_time_constant_s}
+    document = {'scenario': scenario, 'duration': duration, 'settle_time': 0.0, 'controllers': [controller],
+                'flights': 1, 'seed': seed, **{key: value for key, value in world.items() if value is not None}}
+    spec = parse_spec(document)
+    true = nominal if true_vehicle is None else _vehicle('true_vehicle', true_vehicle)
+    events = {key: value for key, value in (('mass_change', mass_change),
+                                            ('rotor_efficiency_loss', rotor_efficiency_loss)) if value is not None}
+    changes = _changes(true, events)
+    if true_vehicle is None and not changes and not (spec.has_wind or spec.sensor_noise or spec.delay_s
+                                                     or spec.motor_time_constant_s):
+        return None
+    conditions = replace(sample_conditions(spec, true, 0), vehicle=true)
+    perturbations = build_perturbations(spec, [conditions], 1.0 / control_rate, 1.0 / physics_rate, batch=False)
+    return replace(perturbations, changes=changes)
 
 
 def check_physics_rate(physics_rate: float, control_rate: float) -> float:
@@ -65,24 +148,37 @@ def check_settle_time(settle_time: float | None, duration: float, control_rate: 
 
 
 def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
-                disturbances: bool | None = None, seed: int = 0, vehicle_file: Path | None = None,
+                disturbances: bool | None = None, seed: int = 0, vehicle_file: Path | VehicleParams | None = None,
                 gains_file: Path | None = None, physics_rate: float = 1000.0, settle_time: float | None = None,
-                max_error: float = 1.0, topics: Sequence[str] | None = None) -> FlightPlan:
+                max_error: float = 1.0, topics: Sequence[str] | None = None, **world) -> FlightPlan:
     """Every setting of a flight, checked; raises ParameterError (see the module doc).
 
-    ``duration`` None: the scenario's length; ``disturbances`` None: as in the vehicle file;
-    ``settle_time`` None: :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the duration;
-    ``topics`` None: every recorded contract topic.
+    ``duration`` None: the scenario's length; ``disturbances`` None: as in the vehicle file (for a
+    VehicleParams ``vehicle_file``: as in the packaged one); ``settle_time`` None:
+    :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the duration; ``topics`` None: every
+    recorded contract topic; ``world``: the keyword arguments of :func:`plan_perturbations`.
     """
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise ParameterError(f'--seed: {seed!r} is outside the valid range [0, {MAX_SEED}] (an integer)')
     if duration is not None:
         duration = check_number('--duration', duration, 0.0, low_inclusive=False)
     max_error = check_number('--max-error', max_error, 0.0, low_inclusive=False)
-    params, vehicle_disturbances = load_vehicle_file(vehicle_file)
+    if disturbances is not None and not isinstance(disturbances, bool):
+        raise ParameterError(f'disturbances: expected True, False or None (as in the vehicle file), got {disturbances!r}')
+    if isinstance(vehicle_file, VehicleParams):
+        params, vehicle_disturbances = vehicle_file, load_vehicle_file(None)[1]
+    elif vehicle_file is None or isinstance(vehicle_file, (str, Path)):
+        params, vehicle_disturbances = load_vehicle_file(vehicle_file)
+    else:
+        raise ParameterError(f'vehicle: expected a VehicleParams or a vehicle YAML path, got {vehicle_file!r}')
     if disturbances is not None:
         vehicle_disturbances = vehicle_disturbances.switched(disturbances)
-    gains = load_gains(gains_file)
+    if gains_file is not None and not isinstance(gains_file, (str, Path)):
+        raise ParameterError(f'gains: expected a gains YAML path, got {gains_file!r}')
+    try:
+        gains = load_gains(gains_file)
+    except ParameterError as error:
+        raise ParameterError(f'gains: {error}') from error
     gains.setdefault('nnit2fsmc', {})['seed'] = seed
     try:
         build_controller(controller, params, gains)
@@ -91,10 +187,13 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
     control_rate = 1.0 / control_period(gains)
     trajectory = make_scenario(scenario, duration)
     duration = trajectory.duration if duration is None else duration
+    physics_rate = check_physics_rate(physics_rate, control_rate)
+    perturbations = plan_perturbations(scenario, controller, seed, duration, control_rate, physics_rate, params,
+                                       **world)
     return FlightPlan(
         controller=controller, scenario=scenario, trajectory=trajectory, params=params,
         disturbances=vehicle_disturbances, gains=gains, seed=seed, duration=duration,
-        physics_rate=check_physics_rate(physics_rate, control_rate), control_rate=control_rate,
+        physics_rate=physics_rate, control_rate=control_rate,
         settle_time=check_settle_time(settle_time, duration, control_rate), max_error=max_error,
-        topics=select_topics(topics))
+        topics=select_topics(topics), perturbations=perturbations)
 

@@ -11,24 +11,26 @@ from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 
-def build_summary(record: FlightRecord, *, backend: str, controller: str, scenario: str, seed: int,
+def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str, scenario: str, seed: int,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
                   physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None,
                   failure_time_s: float | None = None) -> dict:
-    """Metrics of the flight plus everything needed to reproduce it.
+    """Metrics of the flight (its metrics dict, e.g. ``Flight.metrics()``, or a FlightRecord to compute them
+    from) plus everything needed to reproduce it.
 
     ``flight_ok`` is false when the flight ended early (``failure``: why, see
     flight_stack.closed_loop.FAILURES, at sim time ``failure_time_s`` [s], as the flight result and
-    the bag give it; without it, the time of the record's last step), a state or force went
+    the bag give it; without it, the time of the last step: of the record, or the metrics' duration), a state or force went
     non-finite or the largest position error after the settling window exceeds ``max_error`` [m];
     ``failures`` says which, ``failure`` and ``failure_time_s`` why and when it ended early (None if
     it did not).
     """
-    metrics = flight_metrics(record, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
-                             ended_early=failure is not None, arm_length=params.d)
+    metrics = flight if isinstance(flight, dict) else flight_metrics(
+        flight, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
+        ended_early=failure is not None, arm_length=params.d)
     sim_time = metrics['duration_s']
     if failure is not None and failure_time_s is None:
-        failure_time_s = float(record.time[-1])
+        failure_time_s = float(metrics['duration_s'] if isinstance(flight, dict) else flight.time[-1])
     failures = [] if failure is None else [f'the flight ended early: {failure} at {failure_time_s:.3f} s']
     if not metrics['all_finite']:
         failures.append('non-finite state or rotor force')

@@ -269,16 +269,19 @@ def goal_from_msg(msg, frame_id: str = ODOM_FRAME) -> ReferenceSample:
 
 
 def setpoints_msg(kit: MessageKit, path: SetpointPath, frame_id: str = ODOM_FRAME,
-                  child_frame_id: str = BASE_FRAME):
+                  child_frame_id: str = BASE_FRAME, origin: float | None = None):
     """trajectory_msgs/MultiDOFJointTrajectory of a setpoint path (one joint, ``child_frame_id``).
 
-    header.stamp is the path's start; each point's time_from_start is its offset. Transforms hold
+    header.stamp is ``origin`` [s] (default: the path's start; a later part of a path keeps its
+    path's origin, so its times read back as they were); each point's time_from_start is its time
+    minus the origin. Transforms hold
     position and yaw; velocities and accelerations are world-frame (``frame_id``) linear rates and
     the yaw rate and yaw acceleration about z.
     """
     twist = kit['geometry_msgs/msg/Twist']
     transform = kit['geometry_msgs/msg/Transform']
     point_cls = kit['trajectory_msgs/msg/MultiDOFJointTrajectoryPoint']
+    origin = path.start if origin is None else origin
     points = []
     for t, p in zip(path.times, path.points):
         points.append(point_cls(
@@ -287,9 +290,9 @@ def setpoints_msg(kit: MessageKit, path: SetpointPath, frame_id: str = ODOM_FRAM
             velocities=[twist(linear=vector3_msg(kit, p.velocity), angular=vector3_msg(kit, (0.0, 0.0, p.yaw_rate)))],
             accelerations=[twist(linear=vector3_msg(kit, p.acceleration),
                                  angular=vector3_msg(kit, (0.0, 0.0, p.yaw_acceleration)))],
-            time_from_start=duration_msg(kit, t - path.start)))
+            time_from_start=duration_msg(kit, t - origin)))
     return kit['trajectory_msgs/msg/MultiDOFJointTrajectory'](
-        header=header_msg(kit, path.start, frame_id), joint_names=[child_frame_id], points=points)
+        header=header_msg(kit, origin, frame_id), joint_names=[child_frame_id], points=points)
 
 
 def setpoints_from_msg(msg) -> SetpointPath:

@@ -16,6 +16,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 from .model import QuadrotorModel, check_state
 from .perturbations.actuation import MotorLag
+from .perturbations.vehicle_change import VehicleChange, check_changes
 from .perturbations.wind import Wind
 
 
@@ -29,12 +30,17 @@ class Simulator:
     Optional physics between the commanded thrusts and the vehicle, advanced every physics step:
     ``motor_lag`` (:class:`~quad_sim.perturbations.actuation.MotorLag`: the rotors follow the
     commands with a first-order lag) and ``wind`` (:class:`~quad_sim.perturbations.wind.Wind`: the
-    air velocity the vehicle feels, through the vehicle's wind drag).
+    air velocity the vehicle feels, through the vehicle's wind drag). ``changes``
+    (:class:`~quad_sim.perturbations.vehicle_change.VehicleChange`, in time order): from each one's
+    time on (the first physics step that starts at or after it) the model flies its vehicle (a
+    payload picked up or dropped, a rotor losing efficiency).
     """
 
     def __init__(self, model: QuadrotorModel, physics_dt: float, initial_state: Sequence,
-                 motor_lag: MotorLag | None = None, wind: Wind | None = None):
+                 motor_lag: MotorLag | None = None, wind: Wind | None = None,
+                 changes: Sequence[VehicleChange] = ()):
         self.model = model
+        self._changes = list(check_changes(changes))
         check_number('physics_dt', physics_dt, 0.0, 0.1, low_inclusive=False)
         self.physics_dt_ns = nanoseconds(physics_dt)
         if self.physics_dt_ns < 1:
@@ -85,6 +91,9 @@ class Simulator:
         """Integrate ``steps`` physics steps with the current thrust commands."""
         step, dt, lag, wind = self.model.step, self.physics_dt, self.motor_lag, self.wind
         for _ in range(steps):
+            if self._changes and self.time >= self._changes[0].at_s:
+                self.model = QuadrotorModel(self._changes.pop(0).vehicle, self.model.disturbances)
+                step = self.model.step
             thrusts = self.forces if lag is None else lag.step(self.forces)
             air = None if wind is None else wind.step()
             self.state = step(self.time, self.state, thrusts, dt, air)

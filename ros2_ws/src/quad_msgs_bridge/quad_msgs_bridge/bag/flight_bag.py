@@ -50,6 +50,13 @@ def disturbances_label(enabled: bool) -> str:
 FAILURE_KEY, FAILURE_TIME_KEY = 'failure', 'failure_time_s'
 
 
+def recorded_failure(custom: dict) -> tuple[str, float] | None:
+    """(why, when [s, sim time]) a flight failed, from its bag's custom data (as :func:`vehicle_custom_data`
+    gives it); None if none is recorded."""
+    reason = custom.get(FAILURE_KEY)
+    return None if reason is None else (reason, float(custom.get(FAILURE_TIME_KEY, 'nan')))
+
+
 def vehicle_custom_data(custom: dict, namespace: str | None) -> dict:
     """A bag's custom data as one vehicle's flight sees it: in a fleet's bag, the failure keys of vehicle
     ``namespace`` (FAILURE_KEY + ':' + namespace) under the plain FAILURE_KEY and FAILURE_TIME_KEY."""

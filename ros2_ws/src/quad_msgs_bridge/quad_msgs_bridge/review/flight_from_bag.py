@@ -1,4 +1,5 @@
-"""A flight rebuilt from a bag: the :class:`~quad_msgs_bridge.review.metrics.FlightRecord` the live run kept.
+"""A flight rebuilt from a bag: :func:`read_flight` gives the :class:`~quad_msgs_bridge.review.flight_data.Flight`
+the live run kept.
 
 Any rosbag2 bag with the contract topics works (ours, ``ros2 bag record -s mcap``, a sqlite3 copy):
 it is read with ``rosbags``' AnyReader and decoded with the bridge's ``*_from_msg`` readers. One
@@ -11,21 +12,22 @@ from the bag's custom data, else from a vehicle file.
 from __future__ import annotations
 
 import json
+from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from rosbags.highlevel import AnyReader, AnyReaderError
 
-from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, FAILURE_TIME_KEY, vehicle_custom_data
+from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, recorded_failure, vehicle_custom_data
 from quad_msgs_bridge.bag.reader import BagReadError, check_bag_path, is_finalized, mcap_file, read_custom_data
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (ALL_TOPICS, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GROUND_TRUTH,
                                        ODOM, ROTOR_FORCES, TopicSpec, resolve)
 from quad_msgs_bridge.conversions import (controls_from_wrench, diagnostics_from_msg, odometry_from_msg, pose_from_msg,
                           rotor_forces_from_msg)
-from quad_msgs_bridge.review.metrics import (FlightRecord, FlightRecorder, default_settle_time, flight_metrics,
-                                             has_fuzzy_term)
-from quad_msgs_bridge.state import PSI, state_from_odometry
+from quad_msgs_bridge.review.flight_data import Flight, FlightLog
+from quad_msgs_bridge.review.metrics import FlightRecord, default_settle_time, flight_metrics, has_fuzzy_term
+from quad_msgs_bridge.state import state_from_odometry
 from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
 #: the topics a flight record needs
@@ -36,7 +38,9 @@ OPTIONAL_TOPICS = (GROUND_TRUTH,)
 
 @dataclass
 class BagFlight:
-    """A flight with what its review needs: read from a bag, or just flown (its record kept in memory)."""
+    """A flight with what its review needs, made from a FlightRecord in memory (a campaign's replay, a test);
+    :class:`~quad_msgs_bridge.review.flight_data.Flight` (what :func:`read_flight` and ``fly()`` give) has the
+    same attributes."""
 
     path: Path                    #: the bag of the flight
     label: str                    #: controller name (custom data) or the bag's name
@@ -53,8 +57,7 @@ class BagFlight:
     @property
     def failure(self) -> tuple[str, float] | None:
         """(why, when [s, sim time]) the flight failed, from the bag's custom data; None if none is recorded."""
-        reason = self.custom_data.get(FAILURE_KEY)
-        return None if reason is None else (reason, float(self.custom_data.get(FAILURE_TIME_KEY, 'nan')))
+        return recorded_failure(self.custom_data)
 
     def metrics(self) -> dict:
         """The flight's metrics (:func:`~quad_msgs_bridge.review.metrics.flight_metrics`), as ``summary.json``."""
@@ -95,28 +98,54 @@ def _vehicle(custom: dict, vehicle_file: str | Path | None, warnings: list) -> V
     return load_vehicle_file(vehicle_file)[0]
 
 
-@dataclass
-class _Topics:
-    """What the bag's contract topics carry, per message, in log-time order."""
-
-    stamps: list = field(default_factory=list)        #: [ns] of each control/wrench
-    controls: list = field(default_factory=list)      #: U1..U4 of each control/wrench
-    forces: list = field(default_factory=list)        #: each rotor_forces
-    diagnostics: list = field(default_factory=list)   #: each control/diagnostics
-    odometry: dict = field(default_factory=dict)      #: stamp [ns] -> OdometrySample
-    truth: dict = field(default_factory=dict)         #: stamp [ns] -> OdometrySample of ground_truth/odom
-    references: dict = field(default_factory=dict)    #: stamp [ns] -> (position, yaw)
+#: control steps a wrench waits for the odometry and reference of its stamp (the recorder of a ROS flight
+#: may log a step's messages out of order); the read holds at most about this many steps at once
+PAIRING_LAG = 256
 
 
-def _read_topics(bag: Path, namespace: str | None, arm_length: float) -> _Topics:
-    try:
-        return _read_contract_topics(bag, namespace, arm_length)
-    except AnyReaderError as error:
-        raise BagReadError(f'{bag}: not readable as a bag: {error}') from error
+class _StepPairing:
+    """Rebuilds the control steps from the contract messages as they come, in log-time order (see the
+    module doc), and adds each complete one to ``log``; holds only the few steps not yet complete."""
+
+    def __init__(self, log: FlightLog, use_truth: bool):
+        self.log, self.use_truth = log, use_truth
+        self.wrenches, self.forces, self.diagnostics = deque(), deque(), deque()   #: in message order
+        self.odometry, self.truth, self.references = {}, {}, {}                     #: by stamp [ns]
+        self.counts = {'wrenches': 0, 'rotor_forces': 0, 'diagnostics': 0}
+        self.skipped = 0
+
+    def pair(self, final: bool = False) -> None:
+        """Add the steps whose messages have all come (with ``final``: every step that can be paired)."""
+        while self.wrenches and self.forces and self.diagnostics and (final or len(self.wrenches) > PAIRING_LAG):
+            stamp, controls = self.wrenches.popleft()
+            forces, (surfaces, equivalent, corrective, _) = self.forces.popleft(), self.diagnostics.popleft()
+            states = self.truth if self.use_truth else self.odometry
+            sample, reference = states.pop(stamp, None), self.references.pop(stamp, None)
+            for earlier in (self.odometry, self.truth, self.references):   # no later wrench has their stamps
+                while earlier and next(iter(earlier)) < stamp:
+                    del earlier[next(iter(earlier))]
+            if sample is None or reference is None:
+                self.skipped += 1
+                continue
+            position, yaw = reference
+            self.log.add(sample.stamp, state_from_odometry(sample), position, yaw, forces, controls, surfaces,
+                         equivalent, corrective)
+
+    def notes(self) -> list[str]:
+        counts = self.counts
+        notes = []
+        if len(set(counts.values())) > 1:
+            notes.append(f'unequal counts: {counts["wrenches"]} wrenches, {counts["rotor_forces"]} rotor_forces, '
+                         f'{counts["diagnostics"]} diagnostics; pairing the first {min(counts.values())} by order')
+        if self.skipped:
+            notes.append(f'{self.skipped} control steps without odometry or reference of the same stamp were skipped')
+        return notes
 
 
-def _read_contract_topics(bag: Path, namespace: str | None, arm_length: float) -> _Topics:
-    topics = _Topics()
+def _read_steps(bag: Path, namespace: str | None, params: VehicleParams, settle_time: float | None,
+                warnings: list) -> FlightLog:
+    """The bag's control steps in a FlightLog (bounded memory); the settle time [s] None: the default one for
+    the bag's span."""
     with AnyReader([bag], default_typestore=jazzy_typestore()) as reader:
         found = {spec: _find_connection(reader.connections, spec, namespace) for spec in NEEDED_TOPICS}
         missing = [spec.name for spec, connections in found.items() if not connections]
@@ -124,50 +153,33 @@ def _read_contract_topics(bag: Path, namespace: str | None, arm_length: float) -
             raise BagReadError(f'{bag}: no {", ".join(missing)} topic (has: '
                                f'{", ".join(sorted({c.topic for c in reader.connections}))})')
         found.update({spec: _find_connection(reader.connections, spec, namespace) for spec in OPTIONAL_TOPICS})
+        if settle_time is None:
+            settle_time = default_settle_time((reader.end_time - reader.start_time) / 1e9)
+        log = FlightLog(float(settle_time), params.F_min, params.F_max)
+        steps = _StepPairing(log, use_truth=any(c.msgcount for c in found[GROUND_TRUTH]))
         role = {c.id: spec for spec, connections in found.items() for c in connections}
         for connection, _, raw in reader.messages(connections=[c for cs in found.values() for c in cs]):
             msg = reader.deserialize(raw, connection.msgtype)
             spec = role[connection.id]
             if spec is ODOM:
-                topics.odometry[_stamp_ns(msg)] = odometry_from_msg(msg)
+                steps.odometry[_stamp_ns(msg)] = odometry_from_msg(msg)
             elif spec is GROUND_TRUTH:
-                topics.truth[_stamp_ns(msg)] = odometry_from_msg(msg)
+                steps.truth[_stamp_ns(msg)] = odometry_from_msg(msg)
             elif spec is CONTROL_WRENCH:
-                topics.stamps.append(_stamp_ns(msg))
-                topics.controls.append(controls_from_wrench(msg, arm_length))
+                steps.wrenches.append((_stamp_ns(msg), controls_from_wrench(msg, params.d)))
+                steps.counts['wrenches'] += 1
             elif spec is CONTROL_REFERENCE:
-                topics.references[_stamp_ns(msg)] = pose_from_msg(msg)
+                steps.references[_stamp_ns(msg)] = pose_from_msg(msg)
             elif spec is ROTOR_FORCES:
-                topics.forces.append(rotor_forces_from_msg(msg))
+                steps.forces.append(rotor_forces_from_msg(msg))
+                steps.counts['rotor_forces'] += 1
             else:
-                topics.diagnostics.append(diagnostics_from_msg(msg))
-    return topics
-
-
-def _flight_record(topics: _Topics, warnings: list) -> FlightRecord | None:
-    """One row per control step (see the module doc); None if there is no complete step.
-
-    The position and yaw are the true ones: ``ground_truth/odom`` where the bag has it (the
-    odometry then carries sensor noise), else ``odom``.
-    """
-    steps = min(len(topics.stamps), len(topics.forces), len(topics.diagnostics))
-    if steps < max(len(topics.stamps), len(topics.forces), len(topics.diagnostics)):
-        warnings.append(f'unequal counts: {len(topics.stamps)} wrenches, {len(topics.forces)} rotor_forces, '
-                        f'{len(topics.diagnostics)} diagnostics; pairing the first {steps} by order')
-    recorder = FlightRecorder()
-    skipped = 0
-    for stamp, controls, forces, (surfaces, equivalent, corrective, _) in zip(
-            topics.stamps, topics.controls, topics.forces, topics.diagnostics):
-        sample, reference = (topics.truth or topics.odometry).get(stamp), topics.references.get(stamp)
-        if sample is None or reference is None:
-            skipped += 1
-            continue
-        position, yaw = reference
-        recorder.append(sample.stamp, sample.position, state_from_odometry(sample)[PSI], position, yaw,
-                        forces, controls, surfaces, equivalent, corrective)
-    if skipped:
-        warnings.append(f'{skipped} control steps without odometry or reference of the same stamp were skipped')
-    return recorder.record() if recorder.rows else None
+                steps.diagnostics.append(diagnostics_from_msg(msg))
+                steps.counts['diagnostics'] += 1
+            steps.pair()
+        steps.pair(final=True)
+    warnings.extend(steps.notes())
+    return log
 
 
 def fleet_namespaces(bag: str | Path) -> list[str]:
@@ -178,11 +190,13 @@ def fleet_namespaces(bag: str | Path) -> list[str]:
 
 
 def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: str | Path | None = None,
-                settle_time: float | None = None) -> BagFlight:
-    """The flight recorded in ``bag``; raises BagReadError if it lacks what a flight record needs.
+                settle_time: float | None = None) -> Flight:
+    """The flight recorded in ``bag`` (a :class:`~quad_msgs_bridge.review.flight_data.Flight`, the object
+    ``flight_stack.api.fly`` returns); raises BagReadError if it lacks what a flight needs.
 
     ``namespace``, ``vehicle_file`` and ``settle_time`` [s] override what the bag says; without a
-    settle time in either, :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the flight.
+    settle time in either, :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the bag's
+    span. The bag is read message by message: memory stays bounded however long the flight.
     """
     bag = Path(bag)
     check_bag_path(bag)
@@ -195,11 +209,13 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     if namespace is None:
         namespace = custom.get('namespace')
     custom = vehicle_custom_data(custom, namespace)
-    record = _flight_record(_read_topics(bag, namespace, params.d), warnings)
-    if record is None:
+    if settle_time is None and custom.get('settle_time_s'):
+        settle_time = float(custom['settle_time_s'])
+    try:
+        log = _read_steps(bag, namespace, params, settle_time, warnings)
+    except AnyReaderError as error:
+        raise BagReadError(f'{bag}: not readable as a bag: {error}') from error
+    if not log.steps:
         raise BagReadError(f'{bag}: no complete control step')
-    if settle_time is None:
-        recorded = custom.get('settle_time_s')
-        settle_time = float(recorded) if recorded else default_settle_time(record.time[-1] - record.time[0])
-    return BagFlight(bag, custom.get('controller') or bag.name, record, params, float(settle_time), custom, warnings,
-                     ended_early=FAILURE_KEY in custom)
+    return log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
+                      warnings=warnings, ended_early=FAILURE_KEY in custom)

@@ -2,14 +2,13 @@
 
 A :class:`FlightRecord` holds, per control step, what the contract topics carry: the odometry the
 controller answered, the reference for that instant, the rotor thrusts and U1..U4 it sent, and the
-per-subsystem diagnostics. The live backends fill it step by step; the bag review rebuilds it from
-the recorded topics. :func:`flight_metrics` turns either into the numbers of ``summary.json``.
+per-subsystem diagnostics (a :class:`~quad_msgs_bridge.review.flight_data.Flight`, flown or read from
+a bag, gives one). :func:`flight_metrics` turns it into the numbers of ``summary.json``.
 """
 from __future__ import annotations
 
-import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -50,27 +49,6 @@ class FlightRecord:
     surfaces: np.ndarray             #: (N, 6) sliding surfaces S per subsystem
     equivalent: np.ndarray           #: (N, 6) NN (or model) equivalent-control term per subsystem
     corrective: np.ndarray           #: (N, 6) fuzzy (or switching) corrective term per subsystem
-
-
-@dataclass
-class FlightRecorder:
-    """Collects one row per control step (cheap appends) and hands out a :class:`FlightRecord`."""
-
-    rows: list = field(default_factory=list)
-
-    def append(self, t: float, position, yaw: float, reference_position, reference_yaw: float,
-               forces, controls, surfaces, equivalent, corrective) -> None:
-        self.rows.append((t, position, yaw, reference_position, reference_yaw,
-                          forces, controls, surfaces, equivalent, corrective))
-
-    def record(self) -> FlightRecord:
-        if not self.rows:
-            raise ValueError('no control step was recorded')
-        count = len(self.rows)
-        return FlightRecord(*(np.asarray(column, dtype=float) if not isinstance(column[0], (tuple, list)) else
-                              np.fromiter(itertools.chain.from_iterable(column), dtype=float,
-                                          count=count * len(column[0])).reshape(count, -1)
-                              for column in zip(*self.rows)))
 
 
 def fuzzy_share(record: FlightRecord, window: float) -> dict[str, list[float]]:
@@ -267,9 +245,21 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
     :func:`share_extremes`). A flight that ``ended_early`` (failed) before two settled steps has NaN
     tracking figures; any other flight that short is refused (ValueError).
     """
-    stats = record_statistics(record, settle_time, f_min, f_max)
+    return metrics_from_statistics(
+        record_statistics(record, settle_time, f_min, f_max), settle_time,
+        bool(np.isfinite(record.forces).all() and np.isfinite(record.position).all()),
+        fuzzy_share(record, share_window) if fuzzy_term else None, share_window, ended_early=ended_early,
+        arm_length=arm_length)
+
+
+def metrics_from_statistics(stats: TrackingStatistics, settle_time: float, all_finite: bool,
+                            shares: dict | None, share_window: float = SHARE_WINDOW, ended_early: bool = False,
+                            arm_length: float | None = None) -> dict:
+    """The figures of :func:`flight_metrics` from a flight's statistics (of a record, or summed step by step),
+    whether its forces and positions were all finite and its fuzzy shares (None: no fuzzy term); ``arm_length``
+    d [m] for chattering_moment_nm_per_s (None without it)."""
     if stats.settled_steps < 2 and not ended_early:
-        duration = record.time[-1] - record.time[0]
+        duration = stats.last_time - stats.first_time
         raise ValueError(f'the flight of {duration:.3f} s is not longer than the settling window of {settle_time:g} s; '
                          f'pass a settle time below {duration:.3f} s (e.g. --settle-time '
                          f'{default_settle_time(duration):.3g})')
@@ -278,12 +268,11 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
         tracking = {key: ({k: math.nan for k in value} if isinstance(value, dict) else math.nan)
                     for key, value in tracking.items()}
     chattering = {name: float(value) for name, value in tracking['chattering'].items()}
-    shares = fuzzy_share(record, share_window) if fuzzy_term else None
-    duration = float(record.time[-1] - record.time[0])
+    duration = float(stats.last_time - stats.first_time)
     return {
         'settle_time_s': float(settle_time),
         'duration_s': duration,
-        'control_steps': int(len(record.time)),
+        'control_steps': int(stats.steps),
         'rmse_position_m': float(tracking['rmse_position_m']),
         'max_position_error_m': float(tracking['max_position_error_m']),
         'rmse_yaw_rad': float(tracking['rmse_yaw_rad']),
@@ -293,7 +282,7 @@ def flight_metrics(record: FlightRecord, settle_time: float, f_min: float, f_max
                                        else float(chattering_moment(chattering, arm_length))),
         'saturation_fraction': float(tracking['saturation_fraction']),
         'saturation_fraction_whole_flight': float(tracking['saturation_fraction_whole_flight']),
-        'all_finite': bool(np.isfinite(record.forces).all() and np.isfinite(record.position).all()),
+        'all_finite': bool(all_finite),
         'fuzzy_share_window_s': float(share_window),
         'fuzzy_share': shares,
         'fuzzy_share_settled': None if shares is None else

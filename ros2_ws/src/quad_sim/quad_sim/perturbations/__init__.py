@@ -4,6 +4,8 @@
   which :meth:`quad_sim.model.QuadrotorModel.step` turns into drag;
 - :mod:`.sensor_noise`: white noise plus a per-flight bias on the odometry the controller sees;
 - :mod:`.actuation`: transport delay (whole control steps) and first-order motor lag;
+- :mod:`.vehicle_change`: the true vehicle changes from a time t on (payload pick-up or drop, a rotor
+  losing efficiency);
 - :mod:`.streams`: one random stream per purpose and flight, from (campaign seed, flight index).
 
 The true vehicle itself (mass, inertias, drag, CoG offset, per-rotor factors) is a
@@ -13,7 +15,8 @@ batch (numpy arrays of shape (B,)) with the same call.
 from .actuation import MotorLag, TransportDelay
 from .sensor_noise import SensorErrors, SensorNoise
 from .streams import BLOCK_STEPS, FlightStreams, flight_streams
+from .vehicle_change import VehicleChange, vehicle_change
 from .wind import DrydenTurbulence, Wind, low_altitude_scales
 
 __all__ = ['BLOCK_STEPS', 'DrydenTurbulence', 'FlightStreams', 'MotorLag', 'SensorErrors', 'SensorNoise',
-           'TransportDelay', 'Wind', 'flight_streams', 'low_altitude_scales']
+           'TransportDelay', 'VehicleChange', 'Wind', 'flight_streams', 'low_altitude_scales', 'vehicle_change']
