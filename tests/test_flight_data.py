@@ -109,19 +109,31 @@ def test_a_full_log_keeps_every_stride_th_step_and_its_metrics_stay_those_of_eve
                               forces=np.array([s[4] for s in steps]), controls=np.array([s[5] for s in steps]),
                               surfaces=np.array([s[6] for s in steps]), equivalent=np.array([s[7] for s in steps]),
                               corrective=np.array([s[8] for s in steps]))
-    expected = flight_metrics(every_step, 2.0, 0.0, 3.0)
+    expected = flight_metrics(every_step, 2.0, 0.0, 3.0, arm_length=PARAMS_STUB.d)
     got = flight.metrics()
     assert len(got['fuzzy_share']['x']) == 4      # 19.5 s in windows of 5 s
-    for key, value in expected.items():
-        if isinstance(value, dict):
-            for name in value:
-                assert np.allclose(got[key][name], value[name], rtol=1e-12, atol=0.0), (key, name)
-        else:
-            assert got[key] == pytest.approx(value, rel=1e-12, abs=0.0), key
+    assert got['chattering_moment_nm_per_s'] is not None
+    assert_close(got, expected, 'metrics')
+
+
+def assert_close(got, expected, where: str) -> None:
+    """``got`` equals ``expected`` to 1e-12 relative, through nested dicts and lists of figures."""
+    if isinstance(expected, dict):
+        assert set(got) == set(expected), where
+        for key in expected:
+            assert_close(got[key], expected[key], f'{where}.{key}')
+    elif isinstance(expected, (list, tuple)):
+        assert len(got) == len(expected), where
+        for k, (a, b) in enumerate(zip(got, expected)):
+            assert_close(a, b, f'{where}[{k}]')
+    elif isinstance(expected, (int, float)) and not isinstance(expected, bool):
+        assert got == pytest.approx(expected, rel=1e-12, abs=0.0), where
+    else:
+        assert got == expected, where
 
 
 class PARAMS_STUB:
-    F_min, F_max = 0.0, 3.0
+    F_min, F_max, d = 0.0, 3.0, 0.2   # rotor limits [N], arm length [m]
 
 
 @pytest.mark.parametrize('max_rows', [1, 3])
