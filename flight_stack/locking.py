@@ -14,6 +14,8 @@ from typing import Callable
 
 from quad_msgs_bridge.vehicle_params import ParameterError
 
+from .interrupts import deferred
+
 
 class FileLock:
     """The lock on ``path``; ``busy(holder)`` is the ParameterError message when another process
@@ -24,7 +26,19 @@ class FileLock:
         self._file = None
 
     def acquire(self) -> 'FileLock':
-        """Take the lock, or raise ParameterError(busy(holder)); OSError if the file cannot be made."""
+        """Take the lock, or raise ParameterError(busy(holder)); OSError if the file cannot be made.
+
+        A stop signal (:mod:`flight_stack.interrupts`) does not cut it: it is raised once the lock is
+        held, and then the lock is released (its file removed) before the KeyboardInterrupt goes on."""
+        try:
+            with deferred():
+                self._take()
+        except BaseException:
+            self.release()
+            raise
+        return self
+
+    def _take(self) -> None:
         while self._file is None:
             lock = open(self.path, 'a+')
             try:
@@ -45,7 +59,6 @@ class FileLock:
             lock.write(f'{os.getpid()}\n')
             lock.flush()
             self._file = lock
-        return self
 
     def release(self) -> None:
         """Remove the lock file (still held: no other run took it in between), then release it."""

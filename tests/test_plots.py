@@ -67,8 +67,10 @@ def test_tracking_marks_the_settling_time_and_shows_the_settled_error_in_millime
 def test_sliding_surfaces_have_units(hover, figures, tmp_path):
     plots.plot_surfaces(plots._pyplot(), [hover], tmp_path / 'surfaces.png')
     labels = [ax.get_ylabel() for ax in figures['surfaces.png'].axes]
-    # S = de/dt + lambda e: e in m for x, y, z and in rad for the angles
-    assert labels == ['S_x [m/s]', 'S_y [m/s]', 'S_z [m/s]', 'S_phi [rad/s]', 'S_theta [rad/s]', 'S_psi [rad/s]']
+    # S = de/dt + lambda e: e in m for x, y, z and in rad for the angles; a row per subsystem, the whole
+    # flight on the left and its settled zoom on the right, both labelled
+    expected = ['S_x [m/s]', 'S_y [m/s]', 'S_z [m/s]', 'S_phi [rad/s]', 'S_theta [rad/s]', 'S_psi [rad/s]']
+    assert labels == [label for label in expected for _column in ('whole flight', 'settled')]
 
 
 def test_the_fuzzy_share_figure_names_both_windows_and_leaves_out_flights_without_a_fuzzy_term(hover, figures,

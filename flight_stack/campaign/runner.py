@@ -23,7 +23,6 @@ import multiprocessing
 import os
 import signal
 import sys
-import threading
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -34,6 +33,7 @@ import yaml
 
 from quad_msgs_bridge.vehicle_params import ParameterError
 
+from ..interrupts import stop_signals
 from ..locking import FileLock
 from .batch import COLUMNS, BatchJob, CampaignSetup, compile_kernels, fly_batch
 from .results import FLIGHTS_FILE, SUMMARY_FILE, FlightsFile, read_flights, summarize
@@ -195,24 +195,6 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-@contextlib.contextmanager
-def sigterm_interrupts():
-    """SIGTERM raises KeyboardInterrupt here as Ctrl-C does, so that a terminated campaign stops its workers
-    and closes flights.csv (only in the main thread, where signal handlers can be set)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-
-    def interrupt(signum, frame):
-        raise KeyboardInterrupt(f'signal {signum}')
-
-    previous = signal.signal(signal.SIGTERM, interrupt)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
-
-
 class _LocalPool:
     def __init__(self, workers: int):
         self.workers = workers
@@ -285,7 +267,7 @@ def run_campaign(spec: CampaignSpec, out_dir: Path, options: RunOptions) -> Camp
     # files, rates and every controller's gains valid before flying
     CampaignSetup.of(spec, options.vehicle_file, options.gains_file).check_controllers(spec.controllers)
     check_output(spec, out_dir, options.resume)
-    with sigterm_interrupts():
+    with stop_signals():   # SIGTERM stops it as Ctrl-C does: workers stopped, flights.csv closed
         if options.scheduler is None:
             _compile(spec, options)
         with writing(out_dir):
