@@ -280,9 +280,13 @@ def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_read
         assert KILLED_RECORD_ENDS_AFTER <= flight.record.time[-1] < 59.0
 
 
-def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_only_the_silent_ones(ros_node):
+def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_a_step_only_to_a_new_reader(ros_node):
     """Two vehicles answered by hand: an answer of one alone does not advance sim time; after input_timeout the
-    silent vehicle's odometry (only its) is published again and it is named; its answer completes the step."""
+    silent vehicle is named and sim time holds, and nothing is published again (its reader has the step: a slow
+    controller changes neither the flight nor what is published, /clock included); a reader that subscribes to
+    its odom then (a restarted controller) gets its pending odometry, and only its; its answer completes the step."""
+    from quad_msgs_bridge.contract import CLOCK
+
     kit = rclpy_kit()
     odometry = {'a': [], 'b': []}
     forces = {}
@@ -292,24 +296,33 @@ def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_only_the_silent
                                      qos_profile(ODOM.qos))
         forces[name] = ros_node.create_publisher(kit[ROTOR_FORCES.type], f'/pairing/{name}/rotor_forces',
                                                  qos_profile(ROTOR_FORCES.qos))
+    clock = []
+    ros_node.create_subscription(kit[CLOCK.type], CLOCK.name, lambda msg: clock.append(msg.clock.nanosec),
+                                 qos_profile(CLOCK.qos))
     sim = node_process('sim', 'quad_sim.sim_node', 'pairing',
                        {'vehicles': ['a', 'b'], 'initial_state': [0.0] * 24, 'input_timeout': 0.3})
     hover = rotor_forces_msg(kit, [1.0] * 4)
+    late_reader = []
     try:
         assert spin_until(ros_node, lambda: odometry['a'] and odometry['b'] and all(
             publisher.get_subscription_count() for publisher in forces.values()), timeout=30.0)
         forces['a'].publish(hover)
-        spin_until(ros_node, lambda: len(odometry['b']) > 1, timeout=1.0)     # past input_timeout: b repeated
+        assert spin_until(ros_node, lambda: 'b: no rotor_forces' in '\n'.join(sim.lines), timeout=10.0)
+        spin_until(ros_node, lambda: False, timeout=0.7)      # two more input_timeouts: still nothing again
         after_timeout = {name: list(stamps) for name, stamps in odometry.items()}
+        ros_node.create_subscription(kit[ODOM.type], '/pairing/b/odom',
+                                     lambda msg: late_reader.append(msg.header.stamp.nanosec), qos_profile(ODOM.qos))
+        assert spin_until(ros_node, lambda: late_reader, timeout=10.0), 'the new reader never got the pending step'
         forces['b'].publish(hover)
         assert spin_until(ros_node, lambda: odometry['a'][-1] == 1_000_000 and odometry['b'][-1] == 1_000_000,
                           timeout=10.0)
     finally:
         codes = stop_all([sim])
     assert codes == {'sim': 0}
-    assert after_timeout['a'] == [0]                 # a answered: nothing new for it while b is silent
-    assert after_timeout['b'][:2] == [0, 0]          # b's pending odometry again, same stamp: sim time held
-    assert odometry['a'] == [0, 1_000_000] and odometry['b'][-1] == 1_000_000
+    assert after_timeout == {'a': [0], 'b': [0]}      # sim time held, and no step sent twice to a reader that had it
+    assert late_reader[0] == 0                        # the new reader got b's pending odometry: same stamp
+    assert odometry['b'][:2] == [0, 0] and odometry['a'] == [0, 1_000_000]   # the repeat went to b's odom only
+    assert clock[:2] == [0, 1_000_000]                # /clock once per sim time
     log = '\n'.join(sim.lines)
     assert 'b: no rotor_forces for 0.3 s at sim time 0.000 s' in log and 'a: no rotor_forces' not in log
 
