@@ -314,8 +314,8 @@ def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_a_step_only_to_
                                      lambda msg: late_reader.append(msg.header.stamp.nanosec), qos_profile(ODOM.qos))
         assert spin_until(ros_node, lambda: late_reader, timeout=10.0), 'the new reader never got the pending step'
         forces['b'].publish(hover)
-        assert spin_until(ros_node, lambda: odometry['a'][-1] == 1_000_000 and odometry['b'][-1] == 1_000_000,
-                          timeout=10.0)
+        assert spin_until(ros_node, lambda: odometry['a'][-1] == 1_000_000 and odometry['b'][-1] == 1_000_000
+                          and clock[-1] == 1_000_000, timeout=10.0)
     finally:
         codes = stop_all([sim])
     assert codes == {'sim': 0}
