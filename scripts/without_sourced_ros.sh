@@ -6,8 +6,14 @@
 # PATH, PYTHONPATH and LD_LIBRARY_PATH lose their entries inside the sourced installations (AMENT_PREFIX_PATH,
 # COLCON_PREFIX_PATH) and keep the others; the ROS 2 variables go. Kept: ROS_DOMAIN_ID,
 # ROS_AUTOMATIC_DISCOVERY_RANGE, ROS_LOCALHOST_ONLY (they choose the DDS graph, not the ROS).
+# A ROS 2 wheels venv's bootstrapper sets LD_LIBRARY_PATH to its own ros_*.libs and lib/ (a node of one wheels venv
+# starting one of another, e.g. Jazzy-series and Kilted-series wheels): that venv counts as a sourced installation.
 set -euo pipefail
 IFS=: read -ra roots <<< "${AMENT_PREFIX_PATH:-}:${COLCON_PREFIX_PATH:-}"
+IFS=: read -ra library_entries <<< "${LD_LIBRARY_PATH:-}"
+for entry in "${library_entries[@]}"; do
+  if [[ "$entry" == */lib/python3*/site-packages/ros_*.libs ]]; then roots+=("${entry%%/lib/python3*}"); fi
+done
 
 outside_ros() {   # the entries of the path list $1 that are not inside a sourced installation
   local entry root kept=()

@@ -120,12 +120,26 @@ def ros_distribution() -> str | None:
     return os.environ.get('ROS_DISTRO')
 
 
+#: the ROS 2 series of an rclpy by its major version (the PyPI wheels carry both)
+RCLPY_SERIES = {'7': 'jazzy', '9': 'kilted'}
+
+
+def ros_series() -> str | None:
+    """The ROS 2 series of this interpreter's rclpy: the sourced distribution's name, or for the PyPI wheels the
+    series their rclpy belongs to ('jazzy' for rclpy 7.1, 'kilted' for 9.1); None where unknown."""
+    distribution = ros_distribution()
+    if distribution != WHEELS:
+        return distribution
+    return RCLPY_SERIES.get(rclpy_version().split('.')[0])
+
+
 def describe_ros() -> str:
     """One line: which ROS 2 the ROS tests of this interpreter run against (distro, rclpy version, RMW)."""
     if not HAVE_RCLPY:
         return 'ROS 2: none (rclpy cannot be imported: the ROS tests skip)'
     from rclpy.utilities import get_rmw_implementation_identifier
-    origin = {WHEELS: 'the PyPI ROS 2 wheels', None: '(distro unknown: ROS_DISTRO unset)'}.get(
+    series = (ros_series() or 'unknown').capitalize()
+    origin = {WHEELS: f'the PyPI ROS 2 wheels ({series} series)', None: '(distro unknown: ROS_DISTRO unset)'}.get(
         ros_distribution(), ros_distribution())
     return (f'ROS 2: {origin}, rclpy {rclpy_version()}, RMW {get_rmw_implementation_identifier()}, '
             f'tf2_msgs {"yes" if HAVE_TF2_MSGS else "no"}, Python {sys.version.split()[0]}')

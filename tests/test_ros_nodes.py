@@ -280,9 +280,13 @@ def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_read
         assert KILLED_RECORD_ENDS_AFTER <= flight.record.time[-1] < 59.0
 
 
-def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_only_the_silent_ones(ros_node):
+def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_a_step_only_to_a_new_reader(ros_node):
     """Two vehicles answered by hand: an answer of one alone does not advance sim time; after input_timeout the
-    silent vehicle's odometry (only its) is published again and it is named; its answer completes the step."""
+    silent vehicle is named and sim time holds, and nothing is published again (its reader has the step: a slow
+    controller changes neither the flight nor what is published, /clock included); a reader that subscribes to
+    its odom then (a restarted controller) gets its pending odometry, and only its; its answer completes the step."""
+    from quad_msgs_bridge.contract import CLOCK
+
     kit = rclpy_kit()
     odometry = {'a': [], 'b': []}
     forces = {}
@@ -292,24 +296,33 @@ def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_only_the_silent
                                      qos_profile(ODOM.qos))
         forces[name] = ros_node.create_publisher(kit[ROTOR_FORCES.type], f'/pairing/{name}/rotor_forces',
                                                  qos_profile(ROTOR_FORCES.qos))
+    clock = []
+    ros_node.create_subscription(kit[CLOCK.type], CLOCK.name, lambda msg: clock.append(msg.clock.nanosec),
+                                 qos_profile(CLOCK.qos))
     sim = node_process('sim', 'quad_sim.sim_node', 'pairing',
                        {'vehicles': ['a', 'b'], 'initial_state': [0.0] * 24, 'input_timeout': 0.3})
     hover = rotor_forces_msg(kit, [1.0] * 4)
+    late_reader = []
     try:
         assert spin_until(ros_node, lambda: odometry['a'] and odometry['b'] and all(
             publisher.get_subscription_count() for publisher in forces.values()), timeout=30.0)
         forces['a'].publish(hover)
-        spin_until(ros_node, lambda: len(odometry['b']) > 1, timeout=1.0)     # past input_timeout: b repeated
+        assert spin_until(ros_node, lambda: 'b: no rotor_forces' in '\n'.join(sim.lines), timeout=10.0)
+        spin_until(ros_node, lambda: False, timeout=0.7)      # two more input_timeouts: still nothing again
         after_timeout = {name: list(stamps) for name, stamps in odometry.items()}
+        ros_node.create_subscription(kit[ODOM.type], '/pairing/b/odom',
+                                     lambda msg: late_reader.append(msg.header.stamp.nanosec), qos_profile(ODOM.qos))
+        assert spin_until(ros_node, lambda: late_reader, timeout=10.0), 'the new reader never got the pending step'
         forces['b'].publish(hover)
-        assert spin_until(ros_node, lambda: odometry['a'][-1] == 1_000_000 and odometry['b'][-1] == 1_000_000,
-                          timeout=10.0)
+        assert spin_until(ros_node, lambda: odometry['a'][-1] == 1_000_000 and odometry['b'][-1] == 1_000_000
+                          and clock[-1] == 1_000_000, timeout=10.0)
     finally:
         codes = stop_all([sim])
     assert codes == {'sim': 0}
-    assert after_timeout['a'] == [0]                 # a answered: nothing new for it while b is silent
-    assert after_timeout['b'][:2] == [0, 0]          # b's pending odometry again, same stamp: sim time held
-    assert odometry['a'] == [0, 1_000_000] and odometry['b'][-1] == 1_000_000
+    assert after_timeout == {'a': [0], 'b': [0]}      # sim time held, and no step sent twice to a reader that had it
+    assert late_reader[0] == 0                        # the new reader got b's pending odometry: same stamp
+    assert odometry['b'][:2] == [0, 0] and odometry['a'] == [0, 1_000_000]   # the repeat went to b's odom only
+    assert clock[:2] == [0, 1_000_000]                # /clock once per sim time
     log = '\n'.join(sim.lines)
     assert 'b: no rotor_forces for 0.3 s at sim time 0.000 s' in log and 'a: no rotor_forces' not in log
 
@@ -590,7 +603,27 @@ def odometry_stamps_and_publish_times(bag, namespace) -> tuple[np.ndarray, np.nd
             np.array([message.publish_time * 1e-9 for message in messages]))
 
 
+#: [s, wall] a gap longer than this between two rotor_forces of a realtime flight (20 control periods at 1 kHz) is a
+#: stall of the controller (a starved CPU), not its control law at work
+CONTROLLER_STALL = 0.02
+#: [s, sim] how long after a stall the hover is not judged: the vehicle flew it on old forces or at hover thrust
+#: (input_timeout), and the controller needs about a second (its settling time) to bring it back
+STALL_RECOVERY = 1.0
+
+
+def controller_stalls(bag, namespace) -> list[tuple[float, float]]:
+    """The (start, end) [s, sim: the recorder's log times] of each stall of the controller of a realtime flight:
+    two successive rotor_forces sent more than CONTROLLER_STALL apart in wall time."""
+    messages = [message for _, message in recorded(bag, [resolve(ROTOR_FORCES, namespace)])]
+    return [(before.log_time * 1e-9, after.log_time * 1e-9) for before, after in zip(messages, messages[1:])
+            if (after.publish_time - before.publish_time) * 1e-9 > CONTROLLER_STALL]
+
+
 def test_realtime_mode_never_runs_ahead_of_the_wall_clock_and_holds_hover(tmp_path):
+    """At speed factor 1 sim time keeps to the wall clock, and the controller holds the hover to 5 cm after 2 s
+    wherever it kept up: a real-time flight on a starved CPU does degrade (the simulator does not wait), so the
+    hover is judged outside the controller's stalls (and the second after each), over at least a quarter of the
+    window; the stalls are named in the message of a failure."""
     from flight_stack.ros_backend import RosFlightConfig, fly_ros
     from quad_msgs_bridge.bag.timing import message_timing
     from quad_msgs_bridge.review.flight_from_bag import read_flight
@@ -609,7 +642,12 @@ def test_realtime_mode_never_runs_ahead_of_the_wall_clock_and_holds_hover(tmp_pa
     assert len(stamps) > 100
     assert np.all((sent - sent[0]) - (stamps - stamps[0]) >= -2e-3)
     error = np.linalg.norm(flight.record.position - flight.record.reference_position, axis=1)
-    assert error[flight.record.time >= 2.0].max() < 0.05
+    stalls = controller_stalls(tmp_path / 'bag', 'realtime')
+    judged = flight.record.time >= 2.0
+    for start, end in stalls:
+        judged &= (flight.record.time < start) | (flight.record.time > end + STALL_RECOVERY)
+    assert judged.sum() >= 0.25 * (flight.record.time >= 2.0).sum(), f'the controller kept up too little: {stalls}'
+    assert error[judged].max() < 0.05, f'hover error {error[judged].max():.3f} m where it kept up; stalls {stalls}'
     assert np.isfinite(flight.record.forces).all()
     timing = message_timing(tmp_path / 'bag', 'realtime')
     assert timing['answered'] > 0 and timing['latency_median_ms'] > 0.0

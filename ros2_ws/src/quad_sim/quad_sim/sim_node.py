@@ -13,8 +13,11 @@ Modes:
   every vehicle to the next odometry time, repeat. Sim time only advances when all have answered,
   so a run is deterministic and can be faster than real time, and each vehicle flies exactly the
   flight it would fly alone. If a vehicle's answer does not come within ``input_timeout`` seconds
-  of wall time, its pending odometry is published again (a controller that restarted gets it; one
-  that already answered ignores the repeat) and the vehicle is named in a warning.
+  of wall time, the vehicle is named in a warning and sim time holds. Its pending odometry is
+  published again only to reach a reader that subscribed to its ``odom`` after it was sent (a
+  restarted controller: the topic is volatile); a controller that is merely slow has it already (the
+  topic is reliable), so a late answer changes neither the flight nor what is published: a lockstep
+  run publishes each step once, and ``/clock`` once per sim time, however loaded the machine.
 * realtime: a wall timer keeps sim time at ``speed_factor`` times the wall time elapsed, integrating
   the control steps that are due (those of missed ticks too) with the latest forces and publishing
   the newest odometry. A vehicle whose forces are older than ``input_timeout`` goes to hover thrust.
@@ -109,6 +112,8 @@ class SimNode(Node):
         self.answers = LockstepAnswers(len(namespaces))
         self.last_forces_wall = [time.monotonic()] * len(namespaces)   #: realtime: each vehicle's last forces
         self.last_publish_wall = time.monotonic()   #: lockstep: the pending odometry was (re)published then
+        #: lockstep: each vehicle's odom readers (endpoint GIDs) known to have the pending odometry
+        self.odom_readers: list[set[tuple[int, ...]]] = [set() for _ in namespaces]
         self.started = False
         self.subscribed_since: float | None = None   #: wall time the start condition first held
         self.stale: set[int] = set()                 #: vehicles in a stale-input episode
@@ -137,13 +142,15 @@ class SimNode(Node):
 
     # --- shared -----------------------------------------------------------------------------
     def publish_odometry(self, vehicles=None) -> None:
-        """/clock, the odometry of ``vehicles`` (default all) and, for a new step, /tf."""
+        """A new step: /clock, every vehicle's odometry and /tf; a repeat (``vehicles`` named): only their
+        odometry (the clock has not moved, and a repeated TF is redundant: tf2 warns about it)."""
         samples = self.fleet.odometry()
         sec, nanosec = stamp_fields(samples[0].stamp)
-        self.clock_pub.publish(self.encode_clock(sec, nanosec))
+        if vehicles is None:
+            self.clock_pub.publish(self.encode_clock(sec, nanosec))
         for vehicle in range(len(samples)) if vehicles is None else vehicles:
             self.odom_pubs[vehicle].publish(self.encode_odometry[vehicle](sec, nanosec, samples[vehicle]))
-        if vehicles is None and self.tf_pub is not None:   # a repeat would be a redundant TF (tf2 warns about it)
+        if vehicles is None and self.tf_pub is not None:
             self.tf_pub.publish(self.encode_tf(sec, nanosec, samples))
         now = time.monotonic()
         self.last_publish_wall = now
@@ -195,21 +202,41 @@ class SimNode(Node):
         return self.started
 
     # --- lockstep ---------------------------------------------------------------------------
+    def odom_reader_ids(self, vehicle: int) -> set[tuple[int, ...]]:
+        """The endpoint GIDs of the readers of ``vehicle``'s odom now (from the ROS graph)."""
+        return {tuple(info.endpoint_gid) for info in self.get_subscriptions_info_by_topic(self.odom_names[vehicle])}
+
+    def note_odom_readers(self) -> None:
+        for vehicle, readers in enumerate(self.odom_readers):
+            readers.clear()
+            readers.update(self.odom_reader_ids(vehicle))
+
     def lockstep_watchdog(self) -> None:
+        """Start the flight; then, while the steps flow, note who reads each odom; when a vehicle's answer is
+        ``input_timeout`` late, name it once, and send its pending odometry again to readers that joined since."""
         if not self.started:
             if self.ready():
+                self.note_odom_readers()    # from the same graph that ready() checked: they get the first step
                 self.publish_odometry()
             return
-        if self.finished or time.monotonic() - self.last_publish_wall < self.input_timeout:
+        if self.finished:
             return
-        silent = sorted(self.answers.waiting)
-        for vehicle in silent:
+        if time.monotonic() - self.last_publish_wall < self.input_timeout:
+            self.note_odom_readers()        # a reader that joins from here on may have missed the pending step
+            return
+        rejoined = []
+        for vehicle in sorted(self.answers.waiting):
             if vehicle not in self.stale:
                 self.stale.add(vehicle)
                 self.get_logger().warning(
                     f'{self.names[vehicle]}: no rotor_forces for {self.input_timeout:g} s at sim time '
-                    f'{self.fleet.time:.3f} s; holding sim time and publishing its pending odometry again')
-        self.publish_odometry(silent)
+                    f'{self.fleet.time:.3f} s; holding sim time (its pending odometry goes again to a new reader)')
+            readers = self.odom_reader_ids(vehicle)
+            if readers - self.odom_readers[vehicle]:
+                rejoined.append(vehicle)
+            self.odom_readers[vehicle] = readers
+        if rejoined:
+            self.publish_odometry(rejoined)
 
     def on_forces(self, vehicle: int, data: bytes) -> None:
         if self.mode == 'realtime':
