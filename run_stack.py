@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Fly the NNIT2FSMC flight stack from a clone: ``python3 run_stack.py --help`` (see flight_stack/cli.py).
 
-Installed with ``pip install .``, the same command is ``nnit2fsmc-stack``. Run with a Python that lacks
-the stack's packages (numpy, numba, ...), it runs itself again with the clone's ``.venv`` (made by
+Installed with ``pip install .``, the same command is ``nnit2fsmc-stack``. Run with a system Python that
+lacks the stack's packages (numpy, numba, ...), it runs itself again with the clone's ``.venv`` (made by
 ``bash scripts/fly.sh`` or ``scripts/setup_venv.sh``) when there is one, else says so and exits 2.
 """
 import importlib.util
@@ -19,11 +19,12 @@ def missing_packages() -> list:
 
 
 def use_the_venv_or_exit() -> None:
-    """Run again with the clone's .venv python if this Python (not that venv's) lacks a package; without a
-    .venv, exit 2 saying how to run. In the venv itself a missing package is named by the command."""
-    venv = Path(__file__).resolve().parent / '.venv'
-    if Path(sys.prefix).resolve() == venv.resolve():
+    """Run again with the clone's .venv python if this Python, a system one (not a virtual environment),
+    lacks a package; without a .venv, exit 2 saying how to run. Inside a virtual environment (the clone's
+    or another) a missing package is named by the command: a venv a user chose is never swapped silently."""
+    if sys.prefix != sys.base_prefix:
         return
+    venv = Path(__file__).resolve().parent / '.venv'
     missing = missing_packages()
     if not missing:
         return
