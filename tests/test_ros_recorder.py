@@ -2,6 +2,7 @@
 readable (skipped without rclpy)."""
 from __future__ import annotations
 
+import signal
 import threading
 import time
 from collections import defaultdict
@@ -168,6 +169,54 @@ def test_a_killed_recorder_leaves_a_readable_prefix_of_the_flight(tmp_path):
     for name, _ in resolve_all(PER_STEP, ['/' + namespace]):
         assert steps - 1 <= counts[name] <= steps + 1, (name, counts[name], steps)
     assert read_metadata(bag)['message_count'] == sum(counts.values())
+
+
+def test_a_recorder_behind_at_the_end_of_a_flight_still_gets_every_step(ros_node, tmp_path):
+    """A simulator that ends its flight (``exit_at_end``) waits for the recorder to acknowledge its last steps
+    before it exits and takes them away, even when the recorder is seconds behind (a loaded machine starved one
+    by 2 s): the recorder is frozen (SIGSTOP) from the flight's first step until 3 s after the simulator reached
+    its end, then resumes; the bag holds every step of every per-step topic, nothing is counted lost."""
+    namespace, steps = 'behindrec', 600
+    bag = tmp_path / 'bag'
+    first_step = []
+    ros_node.create_subscription(rclpy_kit()[ODOM.type], f'/{namespace}/odom', first_step.append,
+                                 qos_profile(ODOM.qos))
+    processes = [
+        node_process('recorder', 'quad_msgs_bridge.bag.recorder_node', namespace, {'bag': str(bag)}),
+        node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
+                     {'use_sim_time': False, 'scenario': 'hover', 'start_time': 0.0}),
+        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {'use_sim_time': False}),
+        node_process('sim', 'quad_sim.sim_node', namespace,
+                     {'duration': steps / 1000.0, 'exit_at_end': True, 'initial_state': Hover().initial_state,
+                      'wait_for_subscribers': 3}),
+    ]
+    recorder, sim = processes[0], processes[3]
+    try:
+        assert spin_until(ros_node, lambda: first_step, timeout=180.0), '\n'.join(sim.lines)
+        recorder.process.send_signal(signal.SIGSTOP)
+        assert wait_for_line(sim, 'reached duration', 120.0), '\n'.join(sim.lines)
+        time.sleep(3.0)                                  # longer than a node stopped by a signal waits
+        assert sim.returncode is None, 'the simulator left before the recorder acknowledged its last steps'
+        recorder.process.send_signal(signal.SIGCONT)
+        assert sim.process.wait(timeout=60.0) == 0, '\n'.join(sim.lines)
+    finally:
+        recorder.process.send_signal(signal.SIGCONT)
+        codes = stop_all(processes)
+    assert all(code == 0 for code in codes.values()), codes
+    counts = {name: len(messages) for name, messages in bag_messages(bag).items()}
+    for name, _ in resolve_all(PER_STEP, ['/' + namespace]):
+        assert counts.get(name) == steps, (name, counts.get(name), steps)
+    assert 'lost_messages' not in read_metadata(bag)['custom_data']
+
+
+def wait_for_line(process, text: str, timeout: float) -> bool:
+    """Whether ``process`` printed a line containing ``text`` within ``timeout`` [s, wall] (False if it ended)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and process.returncode is None:
+        if any(text in line for line in process.lines):
+            return True
+        time.sleep(0.05)
+    return any(text in line for line in process.lines)
 
 
 def mcap_size(bag: Path) -> int:

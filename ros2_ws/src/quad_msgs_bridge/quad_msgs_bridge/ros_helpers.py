@@ -93,8 +93,9 @@ def wait_for_acknowledgements(node: Node, timeout: float = 2.0) -> None:
     """Wait until every reliable subscriber (a recorder) has acknowledged all that ``node`` published, at most
     ``timeout`` [s, wall] in all: a node that exits right after its last message would otherwise take it away
     from a subscriber that has not yet read it (Fast DDS' shared memory belongs to the publisher). It returns as
-    soon as all is acknowledged; the limit is for a subscriber that is gone (a killed recorder never acknowledges),
-    and stays well inside the grace a stopping node is given (flight_stack.processes.stop_all, 5 s per signal)."""
+    soon as all is acknowledged; the limit is for a subscriber that is gone (a killed recorder never acknowledges).
+    The default stays well inside the grace a node stopped by a signal is given (flight_stack.processes.stop_all,
+    5 s per signal); a simulator that ends its flight itself waits longer (sim_node.END_ACKNOWLEDGEMENT_TIMEOUT)."""
     deadline = time.monotonic() + timeout
     for publisher in node.publishers:
         left = deadline - time.monotonic()

@@ -45,6 +45,10 @@ from .simulator import compile_kernels
 
 MODES = ('lockstep', 'realtime')
 MAX_CATCH_UP = 100   #: realtime: most control steps integrated in one timer tick after a stall
+#: [s, wall] at the end of a flight (``exit_at_end``), how long the node waits at most for its reliable subscribers
+#: (a recorder) to acknowledge its last steps before it exits and takes them away: long enough for a recorder
+#: starved by a loaded machine (one was 2 s behind), bounded for one that is gone (killed) and never acknowledges
+END_ACKNOWLEDGEMENT_TIMEOUT = 30.0
 
 
 class SimNode(Node):
@@ -171,7 +175,8 @@ class SimNode(Node):
                 self.finished = True
                 self.get_logger().info(f'reached duration {self.duration:g} s of sim time; {self.timing_report()}')
                 if self.exit_at_end:
-                    wait_for_acknowledgements(self)   # a recorder gets the last steps before the node goes
+                    # a recorder gets the last steps before the node goes
+                    wait_for_acknowledgements(self, END_ACKNOWLEDGEMENT_TIMEOUT)
                     rclpy.shutdown(context=self.context)
             return True
         return False
