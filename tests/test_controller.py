@@ -210,6 +210,46 @@ def test_nnit2fsmc_starts_knowing_nothing():
     assert all(isinstance(law, NNIT2FSMCLaw) for law in controller.laws.values())
 
 
+@pytest.mark.parametrize('batch', [None, 3])
+def test_acceleration_feedforward_adds_the_reference_acceleration_to_x_and_y_only(batch):
+    """nnit2fsmc.acceleration_feedforward: the x and y laws answer x_d'' + U_eq_hat + U_fuzzy (their virtual
+    control is the acceleration itself, so no vehicle parameter enters), with the same network and fuzzy terms;
+    z and psi, whose virtual controls are a thrust and a moment, are unchanged; false is the paper's law."""
+    state = [0.1, -0.2, 1.1, 0.3, 0.0, -0.1, 0.02, -0.01, 0.1, 0.0, 0.1, 0.0]
+    if batch is not None:
+        state = [np.full(batch, value) for value in state]
+    reference = ReferenceSample((0.0, 0.0, 1.0), (0.5, 0.0, 0.1), (0.7, -0.4, 0.3), 0.0)
+    outputs = {}
+    for feedforward in (True, False):
+        gains = edited('nnit2fsmc.acceleration_feedforward', feedforward)
+        controller = build_controller('nnit2fsmc', PARAMS, gains, batch=batch)
+        for step in range(3):   # the networks learn from the first update on, the same way in both
+            out = controller.update(0.001 * step, state, reference)
+            controller.adapt()
+        outputs[feedforward] = out.axes
+    on, off = outputs[True], outputs[False]
+    for axis, acceleration in (('x', 0.7), ('y', -0.4)):
+        np.testing.assert_allclose(on[axis].value - off[axis].value, acceleration, rtol=1e-12)
+        np.testing.assert_array_equal(on[axis].equivalent, off[axis].equivalent)
+        np.testing.assert_array_equal(on[axis].corrective, off[axis].corrective)
+    for axis in ('z', 'psi'):
+        np.testing.assert_array_equal(on[axis].value, off[axis].value)
+
+
+@pytest.mark.parametrize('spread', [0.25, 1.0, 3.0])
+def test_initial_hidden_weights_are_seeded_within_the_spread(spread):
+    """nnit2fsmc.initial_weight_spread: every subsystem network starts with hidden weights drawn from
+    U(-spread, spread) by its seed (the same draw scaled), and output weights zero (it knows nothing)."""
+    gains = edited('nnit2fsmc.initial_weight_spread', spread)
+    unit = build_controller('nnit2fsmc', PARAMS, edited('nnit2fsmc.initial_weight_spread', 1.0))
+    controller = build_controller('nnit2fsmc', PARAMS, gains)
+    for axis in AXES:
+        network = controller.laws[axis].network
+        assert np.abs(network.hidden_weights).max() <= spread
+        np.testing.assert_allclose(network.hidden_weights, spread * unit.laws[axis].network.hidden_weights, rtol=1e-12)
+        assert not network.output_weights.any()
+
+
 class SpyLaw:
     """Records what the cascade hands a law and answers a fixed virtual control."""
 
@@ -299,6 +339,9 @@ def edited(dotted, value):
     ('nnit2fsmc', 'nnit2fsmc.lower_height', 1.5, 'lower_height'),
     ('nnit2fsmc', 'nnit2fsmc.type_reducer', 'centroid', 'type_reducer'),
     ('nnit2fsmc', 'nnit2fsmc.weight_limit', 0.0, 'nnit2fsmc.weight_limit'),
+    ('nnit2fsmc', 'nnit2fsmc.acceleration_feedforward', 1, 'nnit2fsmc.acceleration_feedforward: expected true or false'),
+    ('nnit2fsmc', 'nnit2fsmc.initial_weight_spread', 0.0, 'nnit2fsmc.initial_weight_spread'),
+    ('nnit2fsmc', 'nnit2fsmc.acceleration_feedforward', KeyError, 'nnit2fsmc.acceleration_feedforward: missing'),
     ('smc-sign', 'smc.switching_gain.phi', -5.0, 'smc.switching_gain.phi'),
     ('smc-sat', 'smc.boundary_layer.x', 0.0, 'smc.boundary_layer.x'),
     ('pid', 'pid.axes.z.kp', -9.0, 'pid.axes.z.kp'),

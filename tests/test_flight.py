@@ -140,7 +140,14 @@ def test_hover_holds_under_disturbances(scenario_flights):
     record = scenario_flights['hover']
     assert_physical(record)
     metrics = flight_metrics(record, SETTLE, PARAMS.F_min, PARAMS.F_max)
-    assert metrics['max_position_error_m'] < 0.002    # 1.3 mm today (0.11 mm before the retune for motor lag)
+    # 5.2 mm today at 5 s, converging: the x, y networks with the larger output cap and the lower learning rate
+    # learn the section IV bias after take-off more slowly (docs/PAPER.md 4.8.8; 1.3 mm before, 0.11 mm before
+    # the retune for motor lag) ...
+    assert metrics['max_position_error_m'] < 0.006
+    # ... and hold it to the same 2 mm as before from 8 s on
+    late = record.time >= 8.0
+    error = np.linalg.norm(record.position[late] - record.reference_position[late], axis=1)
+    assert error.max() < 0.002
 
 
 def test_waypoints_are_followed(scenario_flights):

@@ -10,7 +10,8 @@ moves the work to a moment of the caller's choosing (the controller node: after 
 are on their way).
 
 * :class:`NNIT2FSMCLaw`: the paper's controller. Model-free: it ignores drift and gain;
-  v = U_eq_hat (neural network) + U_fuzzy (IT2 fuzzy corrective term), the network learning online.
+  v = U_eq_hat (neural network) + U_fuzzy (IT2 fuzzy corrective term), the network learning online;
+  with ``feedforward`` (x, y: v is an acceleration) v = q_d'' + U_eq_hat + U_fuzzy.
 * :class:`SlidingModeLaw`: classic SMC, v = (ref_acc - lambda de - drift - K sw(S)) / gain, with
   sw = sign (``boundary_layer`` = 0) or sat(S / boundary_layer).
 * :class:`IntegralSlidingModeLaw`: SMC on the integral surface S = de + lambda e + mu int(e), with a
@@ -108,17 +109,25 @@ class NNIT2FSMCLaw:
     ``learning`` (a bool, or a bool array for a batch) clears the teaching of the vehicles where it
     is false: :class:`~.controller.CascadedController` clears it while a vehicle is on the ground
     (``takeoff_height``), where the error it would learn from cannot be corrected.
+
+    ``feedforward`` adds the reference's own second derivative: v = q_d'' + U_eq_hat + U_fuzzy. It needs no
+    vehicle parameter only where the virtual control is q'' itself (x, y: v is a horizontal acceleration
+    [m/s^2], gain 1, as every baseline's feed-forward), so the law stays model-free; the network is then
+    left with what the reference does not say (drag, wind, the section IV biases) instead of also having to
+    learn the path's acceleration, within its output cap nn_gain (docs/PAPER.md 4.8.8).
     """
 
     STATE = ('_teaching',)   #: what a retune keeps (nnit2fsmc_controller.tuning); the network's is its own
 
     def __init__(self, lam: float, fuzzy: IT2FuzzyCorrector, network: EquivalentControlNetwork,
-                 bias_only: bool = False):
-        """``bias_only``: the network's only input is the constant 1 (ablation ``nnit2fsmc-bias``)."""
+                 bias_only: bool = False, feedforward: bool = False):
+        """``bias_only``: the network's only input is the constant 1 (ablation ``nnit2fsmc-bias``);
+        ``feedforward``: v = q_d'' + U_eq_hat + U_fuzzy (class docstring)."""
         self.lam = check_number('lambda', lam, 0.0, low_inclusive=False)
         self.fuzzy = fuzzy
         self.network = network
         self.bias_only = bias_only
+        self.feedforward = feedforward
         self._teaching = None   #: fuzzy term the network has yet to learn from (0 where it must not learn)
         self.learning = True    #: False (per vehicle) holds the network: set by the controller each update
 
@@ -134,7 +143,7 @@ class NNIT2FSMCLaw:
                 net._inputs, net._output, pending, teaching if pending else 0.0, net.kernel_constants,
                 self.fuzzy.kernel_parameters, self.lam, float(e), float(de), inputs, bool(self.learning))
             net._inputs = inputs
-            return AxisOutput(value, surface, equivalent, corrective)
+            return AxisOutput(value + ref_acc if self.feedforward else value, surface, equivalent, corrective)
         count = net.batch
         inputs = net.stacked_inputs((1.0,) if self.bias_only else (ref_vel, ref_acc, 1.0))
         learning = np.empty(count, dtype=bool)
@@ -146,7 +155,7 @@ class NNIT2FSMCLaw:
             self.fuzzy.kernel_parameters, self.lam, _per_vehicle(e, count), _per_vehicle(de, count), inputs, learning)
         net._inputs = inputs
         value, surface, equivalent, corrective, self._teaching = values
-        return AxisOutput(value, surface, equivalent, corrective)
+        return AxisOutput(value + ref_acc if self.feedforward else value, surface, equivalent, corrective)
 
     def adapt(self) -> None:
         """The network's learning step (eqs. 6-9) from the last update's fuzzy term, if not taken yet."""

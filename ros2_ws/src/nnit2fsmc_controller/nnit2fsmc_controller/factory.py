@@ -27,6 +27,7 @@ DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controll
 ABLATIONS = ('nnit2fsmc-sat', 'nnit2fsmc-type1', 'nnit2fsmc-nolearn', 'nnit2fsmc-bias')
 CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3') + ABLATIONS
 NN_INPUTS = 3   # (ref_vel, ref_acc, 1), see NNIT2FSMCLaw
+FEEDFORWARD_AXES = ('x', 'y')   #: where the virtual control is the subsystem's acceleration (nnit2fsmc.acceleration_feedforward)
 #: the paper-faithful value of every key that changes the controller away from the paper (docs/ADAPTIVE.md),
 #: with the gains of the first tuning (docs/PAPER.md section 3; the defaults were retuned for motor lag):
 #: together they fly the nominal tables' "paper-faithful" rows
@@ -43,6 +44,9 @@ PAPER_FAITHFUL: dict = {
     'nnit2fsmc.modification': 'none',
     'common.measurement_filter_hz': 0.0, 'common.velocity_filter_hz': 0.0,
     'nnit2fsmc.takeoff_height': 0.0,
+    'nnit2fsmc.acceleration_feedforward': False,
+    # the first tuning's x, y network (the paper gives no numbers): output cap and initial hidden weights
+    'nnit2fsmc.axes.x.nn_gain': 1.5, 'nnit2fsmc.axes.y.nn_gain': 1.5, 'nnit2fsmc.initial_weight_spread': 0.5,
     'nnit2fsmc.axes.x.learning_rate': 0.01, 'nnit2fsmc.axes.y.learning_rate': 0.01,
     'nnit2fsmc.axes.z.learning_rate': 0.002, 'nnit2fsmc.axes.phi.learning_rate': 0.05,
     'nnit2fsmc.axes.theta.learning_rate': 0.05, 'nnit2fsmc.axes.psi.learning_rate': 30.0,
@@ -135,6 +139,13 @@ def _positive(tree, dotted: str) -> float:
 
 def _non_negative(tree, dotted: str) -> float:
     return check_number(dotted, _get(tree, dotted), 0.0)
+
+
+def _flag(tree, dotted: str) -> bool:
+    value = _get(tree, dotted)
+    if not isinstance(value, bool):
+        raise ParameterError(f'{dotted}: expected true or false, got {value!r}')
+    return value
 
 
 def control_period(gains: Mapping[str, Any]) -> float:
@@ -260,10 +271,12 @@ def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt
         output_gain=_positive(gains, f'{key}.nn_gain'),
         learning_rate=0.0 if kind == 'nnit2fsmc-nolearn' else learning_rate(gains, axis, dt),
         weight_limit=_positive(gains, 'nnit2fsmc.weight_limit'),
+        initial_spread=_positive(gains, 'nnit2fsmc.initial_weight_spread'),
         seed=int(_non_negative(gains, 'nnit2fsmc.seed')) * len(AXES) + AXES.index(axis), batch=batch,
         modification=modification,
         leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0)
-    return NNIT2FSMCLaw(lam, fuzzy, network, bias_only=kind == 'nnit2fsmc-bias')
+    return NNIT2FSMCLaw(lam, fuzzy, network, bias_only=kind == 'nnit2fsmc-bias',
+                        feedforward=axis in FEEDFORWARD_AXES and _flag(gains, 'nnit2fsmc.acceleration_feedforward'))
 
 
 def flatten_gains(gains: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
@@ -307,6 +320,7 @@ GAIN_DESCRIPTIONS = {
                           'stage of every controller kind (0: none, paper)',
     'takeoff_height': 'height [m, ground at z = 0] below which the vehicle is kept level and the x, y and attitude '
                       'networks do not learn (0: off, paper)',
+    'acceleration_feedforward': 'x, y: add the reference acceleration to the NN and fuzzy terms (false: paper)',
     'modification': 'leakage of the NN learning: none (paper), sigma (sigma-modification) or e (e-modification)',
     'leakage': 'leakage rate sigma of the sigma- or e-modification [1/s]',
     'lambda': 'sliding-surface slope lambda of S = de + lambda e [1/s]',
@@ -316,6 +330,7 @@ GAIN_DESCRIPTIONS = {
     'hidden_units': 'hidden neurons of each subsystem network',
     'weight_limit': 'every NN weight is kept within +-this',
     'seed': 'seed of the initial hidden weights',
+    'initial_weight_spread': 'the initial hidden weights are drawn uniformly from +-this (seeded by seed)',
     'input_scale': 'sliding-surface value that saturates the fuzzy input [units of S]',
     'fuzzy_gain': 'IT2 fuzzy corrective output gain [units of the subsystem control]',
     'nn_gain': 'NN output gain K_eq [units of the subsystem control]',
