@@ -14,14 +14,14 @@
 2. **Authority against wind.** The paper helix (``--duration`` s, section IV disturbances) in a
    steady 6 m/s wind along +x: RMSE per controller. The network's output is capped at nn_gain
    (x, y: 1.5 m/s^2) and the fuzzy term at fuzzy_gain; the integral action of the baselines has no
-   such cap below its clamp. ``nnit2fsmc nn_gain 3``: the same with x, y nn_gain 3 m/s^2.
+   such cap below its clamp. ``nnit2fsmc, previous x, y network``: the same with the x, y network of the
+   defaults before issue 21's improvement (:data:`PREVIOUS`; docs/PAPER.md 4.8.8).
 3. **Authority against path speed.** The helix three times faster (0.5 -> 1.5 rad/s: 1.5 m/s,
-   2.25 m/s^2 centripetal), no wind: RMSE per controller, and the same nn_gain 3 row.
+   2.25 m/s^2 centripetal), no wind: RMSE per controller, and the same previous-network row.
 """
 from __future__ import annotations
 
 import argparse
-import copy
 import math
 import sys
 from pathlib import Path
@@ -34,7 +34,8 @@ import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on t
 from paper_tables import run_all  # noqa: E402
 from flight_stack.closed_loop import ClosedLoop, FailureRules  # noqa: E402
 from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
-from nnit2fsmc_controller.factory import build_controller, build_measurement_stage, load_gains  # noqa: E402
+from nnit2fsmc_controller.factory import (build_controller, build_measurement_stage, flatten_gains, load_gains,
+                                          unflatten_gains)  # noqa: E402
 from nnit2fsmc_controller.trajectory import Helix, make_scenario  # noqa: E402
 from quad_msgs_bridge.review.metrics import flight_metrics  # noqa: E402
 from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
@@ -47,6 +48,10 @@ BIAS = 0.05          #: [rad/s] on the measured yaw rate
 WIND = 6.0           #: [m/s] along +x
 FAST = 1.5           #: [rad/s] helix angular rate (paper: 0.5)
 HOVER = 20.0         #: [s]
+#: the x, y network of the defaults before issue 21's improvement (flat gain names -> values)
+PREVIOUS = {'nnit2fsmc.acceleration_feedforward': False, 'nnit2fsmc.initial_weight_spread': 0.5,
+            'nnit2fsmc.leakage': 0.02, 'nnit2fsmc.axes.x.nn_gain': 1.5, 'nnit2fsmc.axes.y.nn_gain': 1.5,
+            'nnit2fsmc.axes.x.learning_rate': 10.0, 'nnit2fsmc.axes.y.learning_rate': 10.0}
 
 
 def yaw_error_under_bias(kind: str) -> tuple[float, float]:
@@ -71,14 +76,12 @@ def yaw_error_under_bias(kind: str) -> tuple[float, float]:
 
 
 def helix_rmse(task) -> tuple[float, str | None]:
-    """(RMSE [cm] after 5 s, failure) of (kind, nn_gain or None, wind [m/s], angular rate [rad/s], duration)."""
-    kind, nn_gain, wind, rate, duration = task
+    """(RMSE [cm] after 5 s, failure) of (kind, previous network?, wind [m/s], angular rate [rad/s], duration)."""
+    kind, previous, wind, rate, duration = task
     params, disturbances = load_vehicle_file()
     gains = load_gains()
-    if nn_gain is not None:
-        gains = copy.deepcopy(gains)
-        for axis in ('x', 'y'):
-            gains['nnit2fsmc']['axes'][axis]['nn_gain'] = nn_gain
+    if previous:
+        gains = unflatten_gains({**flatten_gains(gains), **PREVIOUS})
     perturbations = Perturbations(wind=Wind(1e-3, mean_speed=wind, direction=0.0) if wind else None)
     result = fly_embedded(kind, Helix(angular_rate=rate, duration=duration), params, disturbances, gains, duration,
                           1000.0, perturbations=perturbations, rules=FailureRules(5.0, 1.0))
@@ -98,7 +101,7 @@ def main(argv=None) -> int:
     parser.add_argument('--jobs', type=int, default=1)
     parser.add_argument('--out', type=Path)
     args = parser.parse_args(argv)
-    rows = [(kind, None) for kind in CONTROLLERS] + [('nnit2fsmc', 3.0)]
+    rows = [(kind, False) for kind in CONTROLLERS] + [('nnit2fsmc', True)]
     bias = run_all(_bias_task, list(CONTROLLERS), args.jobs)
     tasks = [(kind, nn, WIND, 0.5, args.duration) for kind, nn in rows] + \
             [(kind, nn, 0.0, FAST, args.duration) for kind, nn in rows]
@@ -110,7 +113,7 @@ def main(argv=None) -> int:
               '(bench/limits.py)', '', f'| controller | RMSE [cm] wind {WIND:g} m/s | RMSE [cm] helix x{FAST / 0.5:g} |',
               '|---|---:|---:|']
     for kind, nn in rows:
-        name = kind if nn is None else f'{kind} (x, y nn_gain {nn:g})'
+        name = f'{kind}, previous x, y network' if nn else kind
         cells = []
         for task in ((kind, nn, WIND, 0.5, args.duration), (kind, nn, 0.0, FAST, args.duration)):
             rmse, failure = flown[task]
