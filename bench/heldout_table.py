@@ -8,7 +8,8 @@
 
 Columns: flights flown, finished (with the 95 % Wilson interval), finished with RMSE < 10 cm (of all
 flights flown, the target of issue 21, with its interval), RMSE p50 / p95 of the finished flights [cm],
-total chattering p50 [N/s]. A folder still being flown gives the rows flown so far (the column
+chattering p50 of the force channel U1 [N/s] and of the moment channels [N m/s] (the campaign's
+``chattering_force_n_per_s``, ``chattering_moment_nm_per_s``). A folder still being flown gives the rows flown so far (the column
 ``flights`` says how many).
 """
 from __future__ import annotations
@@ -36,7 +37,8 @@ def table(folders, first: int | None = None) -> list[str]:
     """The table's lines; ``first``: only flights 0..first-1 of each folder (the same vehicles for every
     controller of a seed: a paired comparison with a campaign flown with fewer flights)."""
     lines = ['| controller | seed | flights | finished | 95 % interval | finished with RMSE < 10 cm | 95 % interval | '
-             'RMSE p50 / p95 [cm] | TV total p50 [N/s] |', '|---|---:|---:|---:|---|---:|---|---|---:|']
+             'RMSE p50 / p95 [cm] | chattering p50: U1 [N/s] / moments [N m/s] |',
+             '|---|---:|---:|---:|---|---:|---|---|---|']
     for folder in folders:
         seed, rows = rows_of(Path(folder))
         rows = [row for row in rows if first is None or row['flight'] < first]
@@ -47,9 +49,10 @@ def table(folders, first: int | None = None) -> list[str]:
             low, high = wilson_interval(len(finished), len(mine))
             good_low, good_high = wilson_interval(len(good), len(mine))
             rmse = [100.0 * row['rmse_position_m'] for row in finished]
-            tv = [row['chattering_total'] for row in finished]
-            figures = (f'{np.percentile(rmse, 50):.2f} / {np.percentile(rmse, 95):.2f} | {np.percentile(tv, 50):.3g}'
-                       if rmse else '- | -')
+            force = [row['chattering_force_n_per_s'] for row in finished]
+            moments = [row['chattering_moment_nm_per_s'] for row in finished]
+            figures = (f'{np.percentile(rmse, 50):.2f} / {np.percentile(rmse, 95):.2f} | '
+                       f'{np.percentile(force, 50):.3g} / {np.percentile(moments, 50):.3g}' if rmse else '- | -')
             lines.append(f'| {controller} | {seed} | {len(mine)} | {100.0 * len(finished) / len(mine):.1f} % | '
                          f'{100 * low:.1f} - {100 * high:.1f} % | {100.0 * len(good) / len(mine):.1f} % | '
                          f'{100 * good_low:.1f} - {100 * good_high:.1f} % | {figures} |')

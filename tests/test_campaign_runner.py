@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -355,3 +356,22 @@ def test_a_signal_stops_a_campaign_in_every_phase_and_resume_still_works(tmp_pat
     assert stopped_after < 10.0
     assert (out / 'flights.csv').read_text().startswith(before)   # nothing lost, at most rows added
     assert sorted(p.name for p in out.iterdir() if p.name.startswith('.')) == []   # the lock is released
+
+
+def test_the_held_out_table_reads_a_campaign_folder(reference_run):
+    """bench/heldout_table.py reads the columns the campaign writes (it once asked for a column the campaign
+    had renamed): one row per controller with its flights, finished share and the chattering of both channels."""
+    sys.path.insert(0, str(ROOT / 'bench'))
+    try:
+        import heldout_table
+    finally:
+        sys.path.remove(str(ROOT / 'bench'))
+    lines = heldout_table.table([reference_run])
+    rows = {line.split('|')[1].strip(): [cell.strip() for cell in line.split('|')[2:-1]] for line in lines[2:]}
+    assert set(rows) == {'nnit2fsmc', 'pid'}
+    flights = rows_by_key(reference_run)
+    for controller, cells in rows.items():
+        mine = [r for r in flights.values() if r['controller'] == controller and r['finished']]
+        assert cells[0] == '2' and cells[1] == '5'                   # seed, flights
+        for printed, column in zip(cells[-1].split(' / '), ('chattering_force_n_per_s', 'chattering_moment_nm_per_s')):
+            assert printed == f'{np.percentile([r[column] for r in mine], 50):.3g}', column
