@@ -304,10 +304,12 @@ def test_se3_tilt_limit_keeps_the_direction_of_the_horizontal_force(height, limi
 
 # ---------------------------------------------------------------- closed loop, every kind
 #: bounds [m] on the position RMSE after 5 s of an 8 s paper flight (section IV disturbances), each about 3x what
-#: the kind flies today (1.9, 5.8, 23.5, 0.15, 0.12, 0.44 mm; every kind through the measurement stage, the
-#: baselines matched at the fuzzy slope at S = 0): a broken law (a lost term, a sign) misses them
-FLIGHT_RMSE_BOUND = {'nnit2fsmc': 0.006, 'smc-sign': 0.018, 'smc-sat': 0.07, 'smc-integral': 5e-4,
-                     'pid': 4e-4, 'se3': 1.3e-3, 'nnit2fsmc-sat': 0.005, 'nnit2fsmc-type1': 0.005,
+#: the kind flies today (5.8, 23.5, 0.15, 0.12, 0.44 mm; every kind through the measurement stage, the
+#: baselines matched at the fuzzy slope at S = 0): a broken law (a lost term, a sign) misses them. The
+#: NNIT2FSMC and its -sat, -type1 ablations fly 7.2, 6.2, 6.2 mm since issue 21's x, y network (1.9 mm
+#: before), which learns the section IV bias more slowly in the first seconds (docs/PAPER.md 4.8.8): bounds 1.5x
+FLIGHT_RMSE_BOUND = {'nnit2fsmc': 0.011, 'smc-sign': 0.018, 'smc-sat': 0.07, 'smc-integral': 5e-4,
+                     'pid': 4e-4, 'se3': 1.3e-3, 'nnit2fsmc-sat': 0.0095, 'nnit2fsmc-type1': 0.0095,
                      'nnit2fsmc-nolearn': 0.6, 'nnit2fsmc-bias': 0.009}   # about 3x what each flies (8 s helix)
 FLIGHT = 8.0
 
