@@ -300,3 +300,29 @@ def test_a_round_merges_by_publish_time_logs_at_the_latest_clock_and_counts_gaps
                        (forces_topic, 2 * second, late_forces, b'forces-4'),
                        ('/clock', 3 * second, late_clock, clock(3, 0))]
     assert read_metadata(tmp_path / 'bag')['custom_data']['lost_messages'] == '2'
+    assert 'loss_check' not in read_metadata(tmp_path / 'bag')['custom_data']
+
+
+def test_without_sequence_numbers_the_bag_says_losses_were_not_counted(tmp_path):
+    """An RMW that reports no publication sequence numbers (rmw_cyclonedds_cpp in Jazzy) leaves the recorder
+    unable to count losses: the bag metadata says so (``loss_check``) instead of looking complete."""
+    from quad_msgs_bridge.bag.recorder_node import RecorderNode
+    from quad_msgs_bridge.fast_cdr import clock_encoder
+
+    rclpy.init(args=['--ros-args', '-r', '__ns:=/unnumbered', '-p', f'bag:={tmp_path / "bag"}',
+                     '-p', 'topics:=["/clock"]'])
+    node = None
+    try:
+        node = RecorderNode(rclpy_kit())
+        unnumbered = {'source_timestamp': 100, 'received_timestamp': 105, 'publication_sequence_number': None,
+                      'publisher_gid': {'data': b'p'}}
+        node._recorded = [(name, is_clock, QueuedHandle([(clock_encoder()(1, 0), unnumbered)]), msg_type, delivered)
+                          for name, is_clock, _, msg_type, delivered in node._recorded]
+        assert node.take_round() == 1
+        node.finish()
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    custom = read_metadata(tmp_path / 'bag')['custom_data']
+    assert custom['loss_check'].startswith('unavailable') and 'lost_messages' not in custom

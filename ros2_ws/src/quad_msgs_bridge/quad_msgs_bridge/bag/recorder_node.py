@@ -21,7 +21,9 @@ before them, at the next one. Log times never decrease while /clock does not.
 
 Nothing is lost unnoticed: each publisher numbers its messages (DDS publication sequence number),
 and a gap in what the recorder took is counted, reported at the end, stored in the bag metadata
-(``custom_data.lost_messages``) and makes the recorder exit 1.
+(``custom_data.lost_messages``) and makes the recorder exit 1. Where the RMW does not report those
+numbers (rmw_cyclonedds_cpp in Jazzy) losses cannot be counted: the recorder says so once and stores
+``custom_data.loss_check: unavailable``.
 
 One recorder records a fleet: the contract topics of every vehicle of ``vehicles`` (namespaces
 relative to the node's, by default its own), ``/clock`` and ``/tf`` once. Per-step topics published
@@ -96,6 +98,7 @@ class RecorderNode(Node):
         self.clock_ns: int | None = 0 if CLOCK in self.topics else None    #: sim time of the latest /clock [ns]
         self.received = 0
         self.lost = 0                                 #: messages missing between publication sequence numbers
+        self.numbered = True                          #: whether the RMW reports publication sequence numbers
         self._sequences: dict[tuple, int] = {}        #: (topic, publisher gid) -> last publication sequence number
         self._recorded: list[tuple] = []              #: (name, is_clock, subscription handle, type, delivered)
         self._published: dict[str, int] = {}          #: topic -> source timestamp of its latest message [ns]
@@ -184,6 +187,10 @@ class RecorderNode(Node):
         """Count the messages missing before this one of its publisher (a gap in its sequence numbers)."""
         sequence, publisher = info.get('publication_sequence_number'), info.get('publisher_gid')
         if sequence is None or publisher is None:   # an rmw that does not number its messages
+            if self.numbered:
+                self.numbered = False
+                self.get_logger().warning('this RMW reports no publication sequence numbers: lost messages '
+                                          'cannot be counted')
             return
         key = (name, publisher['data'])
         last = self._sequences.get(key)
@@ -208,6 +215,8 @@ class RecorderNode(Node):
         self.write_held(float('inf'))
         if self.lost:
             self.writer.custom_data['lost_messages'] = str(self.lost)
+        if not self.numbered:
+            self.writer.custom_data['loss_check'] = 'unavailable: the RMW reports no publication sequence numbers'
         self.writer.close()
         lost = f', {self.lost} LOST (gaps in the publishers\' sequence numbers)' if self.lost else ''
         print(f'recorder: {self.received} messages written to {self.writer.path}{lost}', flush=True)
