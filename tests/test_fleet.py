@@ -85,5 +85,6 @@ def test_rosbag2_qos_overrides_cover_every_vehicle():
     assert sorted(overrides) == sorted([f'/uav{k}/{name}' for k in (1, 2) for name in PER_VEHICLE]
                                        + ['/clock', '/tf'])
     assert overrides['/uav2/odom']['depth'] == 1000
+    # /tf as tf2 publishes it (reliable, volatile), with the lockstep topics' history (contract.TF_QOS)
     assert (overrides['/tf']['reliability'], overrides['/tf']['durability'], overrides['/tf']['depth']) == \
-        ('reliable', 'volatile', 100)
+        ('reliable', 'volatile', 1000)
