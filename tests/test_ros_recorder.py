@@ -128,20 +128,24 @@ def test_a_recorded_flight_holds_exactly_the_bytes_that_were_published(ros_node,
     assert in_file_order == sorted(log_times)   # written in log-time order
 
 
-def test_a_killed_recorder_leaves_a_readable_prefix_of_the_flight(tmp_path):
-    """SIGKILL the recorder process mid-flight: after ``recover``, rosbags reads the bag, and what it holds is the
-    flight's beginning without a hole: every odometry step from the first, each per-step topic up to a step."""
-    namespace = 'killedrec'
-    start = Hover().initial_state
-    bag = tmp_path / 'bag'
-    processes = [
+def recorded_hover(namespace: str, bag: Path, sim_params: dict) -> list:
+    """The recorder (into ``bag``), a hover trajectory, the controller and the simulator (``sim_params`` beside the
+    hover's initial state) of ``namespace``, each in its own process, on the wall clock; the recorder first."""
+    return [
         node_process('recorder', 'quad_msgs_bridge.bag.recorder_node', namespace, {'bag': str(bag)}),
         node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
                      {'use_sim_time': False, 'scenario': 'hover', 'start_time': 0.0}),
         node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {'use_sim_time': False}),
-        node_process('sim', 'quad_sim.sim_node', namespace,
-                     {'duration': 600.0, 'initial_state': start, 'wait_for_subscribers': 2}),
+        node_process('sim', 'quad_sim.sim_node', namespace, {'initial_state': Hover().initial_state, **sim_params}),
     ]
+
+
+def test_a_killed_recorder_leaves_a_readable_prefix_of_the_flight(tmp_path):
+    """SIGKILL the recorder process mid-flight: after ``recover``, rosbags reads the bag, and what it holds is the
+    flight's beginning without a hole: every odometry step from the first, each per-step topic up to a step."""
+    namespace = 'killedrec'
+    bag = tmp_path / 'bag'
+    processes = recorded_hover(namespace, bag, {'duration': 600.0, 'wait_for_subscribers': 2})
     recorder = processes[0]
     try:
         deadline = time.monotonic() + 180.0
@@ -185,15 +189,8 @@ def test_a_recorder_behind_at_the_end_of_a_flight_still_gets_every_step(ros_node
     first_step = []
     ros_node.create_subscription(rclpy_kit()[ODOM.type], f'/{namespace}/odom', first_step.append,
                                  qos_profile(ODOM.qos))
-    processes = [
-        node_process('recorder', 'quad_msgs_bridge.bag.recorder_node', namespace, {'bag': str(bag)}),
-        node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
-                     {'use_sim_time': False, 'scenario': 'hover', 'start_time': 0.0}),
-        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {'use_sim_time': False}),
-        node_process('sim', 'quad_sim.sim_node', namespace,
-                     {'duration': steps / 1000.0, 'exit_at_end': True, 'initial_state': Hover().initial_state,
-                      'wait_for_subscribers': 3}),
-    ]
+    processes = recorded_hover(namespace, bag, {'duration': steps / 1000.0, 'exit_at_end': True,
+                                                'wait_for_subscribers': 3})
     recorder, sim = processes[0], processes[3]
     try:
         assert spin_until(ros_node, lambda: first_step, timeout=180.0), '\n'.join(sim.lines)
