@@ -49,5 +49,5 @@ check_refuses() {   # package executable params-file-or-none bad-parameter
 check_refuses quad_sim quad_sim quad_sim.yaml mode:=warp
 check_refuses nnit2fsmc_controller nnit2fsmc_controller controller.yaml controller:=lqr
 check_refuses nnit2fsmc_controller trajectory trajectory.yaml scenario:=loop
-check_refuses quad_msgs_bridge record none queue_size:=0
+check_refuses quad_msgs_bridge record none settle_time:=-1.0
 exit $status
