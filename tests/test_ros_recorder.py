@@ -300,6 +300,44 @@ def test_a_round_merges_by_publish_time_logs_at_the_latest_clock_and_counts_gaps
     assert 'loss_check' not in read_metadata(tmp_path / 'bag')['custom_data']
 
 
+def test_a_late_answer_is_logged_at_its_step_though_later_clocks_were_taken_first(tmp_path):
+    """A starved recorder may take the simulator's later /clock messages before a controller's answer that was
+    published between them (the answer came 200 ms late under load): the clocks after it wait until the
+    answer's topic has brought something published after them, so the answer is logged at its own step."""
+    from quad_msgs_bridge.bag.recorder_node import RecorderNode
+    from quad_msgs_bridge.fast_cdr import clock_encoder
+
+    rclpy.init(args=['--ros-args', '-r', '__ns:=/latecheck', '-p', f'bag:={tmp_path / "bag"}',
+                     '-p', 'topics:=["rotor_forces", "/clock"]'])
+    node = None
+    ms = 1_000_000
+    try:
+        node = RecorderNode(rclpy_kit())
+        clock = clock_encoder()
+        start = time.time_ns() - 2 * NANOSECONDS_PER_SECOND    # within WAIT_LIMIT_NS: held messages may wait
+        handles = {'/clock': QueuedHandle([(clock(1, 0), info(start, 1)), (clock(2, 0), info(start + 100 * ms, 2)),
+                                           (clock(3, 0), info(start + 200 * ms, 3))]),
+                   '/latecheck/rotor_forces': QueuedHandle([(b'answer-1', info(start + 50 * ms, 1))])}
+        node._recorded = [(name, is_clock, handles[name], msg_type, delivered)
+                          for name, is_clock, _, msg_type, delivered in node._recorded]
+        assert node.take_round() == 4
+        assert node.received == 2                    # clock 1 and answer 1; clock 2 may still have answers before it
+        handles['/latecheck/rotor_forces'].messages.append((b'answer-1-late', info(start + 60 * ms, 2)))
+        assert node.take_round() == 1
+        assert node.received == 3
+        node.finish()
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    with open(mcap_file(tmp_path / 'bag'), 'rb') as stream:
+        logged = [(channel.topic, message.log_time) for _, channel, message in
+                  make_reader(stream).iter_messages(log_time_order=False)]
+    second = NANOSECONDS_PER_SECOND
+    assert logged == [('/clock', second), ('/latecheck/rotor_forces', second), ('/latecheck/rotor_forces', second),
+                      ('/clock', 2 * second), ('/clock', 3 * second)]
+
+
 def test_without_sequence_numbers_the_bag_says_losses_were_not_counted(tmp_path):
     """An RMW that reports no publication sequence numbers (rmw_cyclonedds_cpp in Jazzy) leaves the recorder
     unable to count losses: the bag metadata says so (``loss_check``) instead of looking complete."""

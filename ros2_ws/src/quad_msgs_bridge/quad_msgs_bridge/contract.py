@@ -77,6 +77,8 @@ RECORDED_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, CONTROL_WRENCH
                    CONTROL_DIAGNOSTICS, CLOCK, TF)
 #: the simulator's topics (the others are the controller's, the trajectory's and the tools')
 SIMULATOR_TOPICS = (ODOM, CLOCK, TF, GROUND_TRUTH)
+#: published at every step of a flight (the simulator's and the controllers' answers), the others once or on demand
+PER_STEP_TOPICS = (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, GROUND_TRUTH, CLOCK, TF)
 
 
 def resolve(topic: TopicSpec, namespace: str) -> str:

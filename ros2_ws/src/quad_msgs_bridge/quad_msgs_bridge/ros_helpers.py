@@ -89,18 +89,28 @@ def declare(node: Node, name: str, default: Any, description: str,
     return value
 
 
-def wait_for_acknowledgements(node: Node, timeout: float = 2.0) -> None:
+#: [s, wall] how long a node stopped by a signal waits for its reliable subscribers' acknowledgements: above Fast
+#: DDS' 3 s heartbeat period (a message a starved reader's transport dropped is repaired after the next heartbeat:
+#: with 2 s a controller left a recorder SIGSTOPped through a flight 257 of its 600 answers), inside the 5 s grace
+#: a node stopped by a signal is given (flight_stack.processes.stop_all)
+ACKNOWLEDGEMENT_TIMEOUT = 4.0
+
+
+def wait_for_acknowledgements(node: Node, timeout: float = ACKNOWLEDGEMENT_TIMEOUT) -> bool:
     """Wait until every reliable subscriber (a recorder) has acknowledged all that ``node`` published, at most
     ``timeout`` [s, wall] in all: a node that exits right after its last message would otherwise take it away
     from a subscriber that has not yet read it (Fast DDS' shared memory belongs to the publisher). It returns as
     soon as all is acknowledged; the limit is for a subscriber that is gone (a killed recorder never acknowledges).
-    The default stays well inside the grace a node stopped by a signal is given (flight_stack.processes.stop_all,
-    5 s per signal); a simulator that ends its flight itself waits longer (sim_node.END_ACKNOWLEDGEMENT_TIMEOUT)."""
+    A simulator that ends its flight itself waits longer (sim_node.END_ACKNOWLEDGEMENT_TIMEOUT). Returns whether
+    all was acknowledged; if not, the node warns (which topic), so a subscriber's missing messages are not silent."""
     deadline = time.monotonic() + timeout
     for publisher in node.publishers:
         left = deadline - time.monotonic()
         if left <= 0.0 or not publisher.wait_for_all_acked(Duration(seconds=left)):
-            return
+            node.get_logger().warning(f'{publisher.topic_name}: not acknowledged by every reliable subscriber within '
+                                      f'{timeout:g} s: a subscriber (a recorder) may miss the last messages')
+            return False
+    return True
 
 
 def init_ros(argv: list[str] | None = None) -> list[int]:

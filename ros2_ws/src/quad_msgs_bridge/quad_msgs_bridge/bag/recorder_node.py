@@ -11,13 +11,16 @@ the controllers, and the DDS delivery to one more reader.
 Each message has two times. The publish time is the wall time the publisher sent it (DDS source
 timestamp). The log time is the sim time of the latest ``/clock`` published before it (0 before the
 first one, as a ROS clock under ``use_sim_time`` reads; the publish time if ``/clock`` is not
-recorded): the recorder holds what it took until a ``/clock`` published after it has come (a
-publisher's messages arrive in order, so every /clock before it is there too), ``HOLD_NS`` at least
-(a message of another topic published before it may still be on its way) and ``CLOCK_WAIT_NS`` at
-most, and writes it in the order of the source timestamps (each topic in its own order): on a busy
-machine a message repaired by DDS came 560 ms late here. So a control step's odometry is logged at
-its stamp, the controller's answers at that stamp or, where the simulator's next ``/clock`` went out
-before them, at the next one. Log times never decrease while /clock does not.
+recorded). So the recorder writes what it took in the order of the source timestamps (each topic in
+its own order), and holds a message until every per-step topic (``PER_STEP_TOPICS``: ``/clock``,
+odom, the controllers' answers) that has delivered anything has delivered a message published after
+it: a publisher's messages arrive in order, so nothing published before it can still come on those
+topics. It holds a message ``HOLD_NS`` at least (for the other topics) and ``WAIT_LIMIT_NS`` at most
+(a topic whose publisher stopped holds nothing longer). On a busy machine DDS repaired a message
+560 ms late here, and a starved recorder took a controller's answer 200 ms after the simulator's
+later ``/clock`` messages. So a control step's odometry is logged at its stamp, the controller's
+answers at that stamp or, where the simulator's next ``/clock`` went out before them, at the next
+one. Log times never decrease while /clock does not.
 
 Nothing is lost unnoticed: each publisher numbers its messages (DDS publication sequence number),
 and a gap in what the recorder took is counted, reported at the end, stored in the bag metadata
@@ -44,8 +47,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 
 from quad_msgs_bridge.bag.writer import BagWriter
-from quad_msgs_bridge.contract import (CLOCK, ODOM, RECORDED_TOPICS, SIMULATOR_TOPICS, TopicSpec, resolve_all,
-                                       vehicle_namespaces)
+from quad_msgs_bridge.contract import (CLOCK, ODOM, PER_STEP_TOPICS, RECORDED_TOPICS, SIMULATOR_TOPICS, TopicSpec,
+                                       resolve_all, vehicle_namespaces)
 from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
 from quad_msgs_bridge.bag.flight_bag import flight_custom_data
 from quad_msgs_bridge.ros_helpers import declare, init_ros, qos_profile
@@ -56,8 +59,9 @@ from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 RECORD_DEPTH = 10000     #: reader history per topic: rounds ROUND_PERIOD apart never let it overflow
 ROUND_PERIOD = 0.01      #: [s, wall] the recorder takes what waits this often
 HOLD_NS = 500_000_000    #: [ns, wall] a message is written once it was published this long ago (a message
-                         #: of another topic published before it may still be on its way) ...
-CLOCK_WAIT_NS = 5 * HOLD_NS   #: [ns, wall] ... and a /clock published after it was taken, or this long ago
+                         #: of another topic published before it may still be on its way) and every per-step
+                         #: topic delivered one published after it ...
+WAIT_LIMIT_NS = 5 * HOLD_NS   #: [ns, wall] ... or once it was published this long ago
 SPIN_PERIOD = 0.05       #: [s, wall] timers, services and discovery are served this often
 QUIET_TIME = 0.3         #: [s, wall] after SIGINT/SIGTERM, stop once nothing has arrived for this long
 
@@ -102,9 +106,10 @@ class RecorderNode(Node):
         self._sequences: dict[tuple, int] = {}        #: (topic, publisher gid) -> last publication sequence number
         self._recorded: list[tuple] = []              #: (name, is_clock, subscription handle, type, delivered)
         self._published: dict[str, int] = {}          #: topic -> source timestamp of its latest message [ns]
+        self._per_step = [name for name, topic in resolve_all(self.topics, self.namespaces)
+                          if topic in PER_STEP_TOPICS]
         self._waiting: list[tuple] = []               #: taken, not yet written, in the order of publication
         self._arrivals = 0
-        self._clock_published = 0                     #: source timestamp of the newest /clock taken [ns]
         for name, topic in resolve_all(self.topics, self.namespaces):
             if topic is not ODOM:
                 self.subscribe(name, topic)
@@ -133,14 +138,13 @@ class RecorderNode(Node):
         self._recorded.insert(0 if topic is CLOCK else len(self._recorded), entry)
 
     def take_round(self) -> int:
-        """Take every message waiting in any subscription; write, in the order they were published, those
-        published more than HOLD_NS ago. Returns how many messages were taken."""
+        """Take every message waiting in any subscription; write, in the order they were published, those that
+        nothing can precede any more (see the module docstring). Returns how many messages were taken."""
         taken = self.take()
         now = time.time_ns()
-        if self.clock_ns is None:
-            self.write_held(now - HOLD_NS)
-        else:   # a /clock publisher's messages arrive in order: all /clock before this one are here
-            self.write_held(max(min(self._clock_published, now - HOLD_NS), now - CLOCK_WAIT_NS))
+        # a publisher's messages arrive in order: on each per-step topic, all published before its latest are here
+        latest = [self._published[name] for name in self._per_step if name in self._published]
+        self.write_held(max(min(latest + [now - HOLD_NS]), now - WAIT_LIMIT_NS))
         return taken
 
     def take(self) -> int:
@@ -162,17 +166,15 @@ class RecorderNode(Node):
                 waiting.append((published, order, self._arrivals, name, is_clock, data))
                 self._arrivals += 1
             self._published[name] = published
-            if is_clock:
-                self._clock_published = published
             taken += len(messages)
         if taken:
             waiting.sort()
         return taken
 
-    def write_held(self, published_before: float) -> None:
-        """Write the held messages published before ``published_before`` [ns, wall], in the order of publication."""
+    def write_held(self, published_until: float) -> None:
+        """Write the held messages published until ``published_until`` [ns, wall], in the order of publication."""
         waiting = self._waiting
-        ready = bisect.bisect_left(waiting, (published_before,))
+        ready = bisect.bisect_right(waiting, (published_until, 2))   # 2: after every order of that instant
         if not ready:
             return
         write = self.writer.write_serialized
