@@ -205,6 +205,8 @@ def test_a_recorder_behind_at_the_end_of_a_flight_still_gets_every_step(ros_node
         codes = stop_all(processes[1:])                  # the recorder last, as flight_stack.ros_backend does:
         codes.update(stop_all(processes[:1], grace=30.0))  # it drains what the others still send
     assert all(code == 0 for code in codes.values()), codes
+    unacknowledged = [line for process in processes for line in process.lines if 'not acknowledged' in line]
+    assert not unacknowledged, unacknowledged
     counts = {name: len(messages) for name, messages in bag_messages(bag).items()}
     for name, _ in resolve_all(PER_STEP, ['/' + namespace]):
         assert counts.get(name) == steps, (name, counts.get(name), steps)
