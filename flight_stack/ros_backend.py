@@ -63,6 +63,7 @@ class RosFlightResult:
     failed_node: str | None
     exit_codes: dict[str, int]
     sim_report: str
+    sim_log: tuple[str, ...] = ()    #: every line the simulator printed
 
 
 def _ros_args(namespace: str, params: dict) -> list[str]:
@@ -143,4 +144,4 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
         if failed is None and code != 0:
             failed = name
     report = next((line for line in reversed(processes[-1].lines) if 'steps/s' in line), '') if processes else ''
-    return RosFlightResult(wall, failed, codes, report)
+    return RosFlightResult(wall, failed, codes, report, tuple(processes[-1].lines) if processes else ())

@@ -267,6 +267,8 @@ class SimNode(Node):
         now = time.monotonic()
         if self.realtime_origin is None:
             self.realtime_origin = now
+            self.get_logger().info(f'realtime: sim time {self.fleet.time:g} s is wall time {time.time():.6f} s, '
+                                   f'speed factor {self.speed_factor:g}')
         due = int((now - self.realtime_origin) * self.speed_factor * self.odometry_rate) - self.control_steps
         if due <= 0:
             return
