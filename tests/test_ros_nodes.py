@@ -39,15 +39,6 @@ from nnit2fsmc_controller.trajectory import Hover, make_scenario
 FLOWN_TOPICS = [t for t in RECORDED_TOPICS if t is not TF or HAVE_TF2_MSGS]
 
 
-@pytest.fixture
-def ros_node():
-    rclpy.init()
-    node = rclpy.create_node('integration_test')
-    yield node
-    node.destroy_node()
-    rclpy.shutdown()
-
-
 def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
     namespace = 'contract_check'
     kit = rclpy_kit()

@@ -54,15 +54,6 @@ def stamp_ns(cdr: bytes) -> int:
         int.from_bytes(cdr[8:12], 'little')
 
 
-@pytest.fixture
-def ros_node():
-    rclpy.init()
-    node = rclpy.create_node('recorder_test')
-    yield node
-    node.destroy_node()
-    rclpy.shutdown()
-
-
 def test_a_recorded_flight_holds_exactly_the_bytes_that_were_published(ros_node, tmp_path):
     """Beside the recorder, this test subscribes to every recorded topic twice: raw (the bytes as sent) and the
     usual way (decoded messages). The bag holds the sent bytes, byte for byte, in order, and nothing is
