@@ -105,14 +105,13 @@ class SimNode(Node):
         self.clock_pub = publisher(self, kit, CLOCK)
         self.odom_pubs = [publisher(self, kit, ODOM, namespace) for namespace in namespaces]
         self.odom_names = [resolve(ODOM, namespace) for namespace in namespaces]
-        self.forces_names = [resolve(ROTOR_FORCES, namespace) for namespace in namespaces]
         self.tf_pub = self.tf_publisher(kit) if publish_tf else None
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs
         self.encode_clock = clock_encoder()
         self.encode_odometry = [odometry_encoder(ODOM_FRAME, frame) for frame in frames]
         self.encode_tf = tf_encoder(frames)
-        for vehicle, namespace in enumerate(namespaces):
-            subscription(self, kit, ROTOR_FORCES, partial(self.on_forces, vehicle), raw=True, namespace=namespace)
+        self.forces_subs = [subscription(self, kit, ROTOR_FORCES, partial(self.on_forces, vehicle), raw=True,
+                                         namespace=namespace) for vehicle, namespace in enumerate(namespaces)]
         self.answers = LockstepAnswers(len(namespaces))
         self.last_forces_wall = [time.monotonic()] * len(namespaces)   #: realtime: each vehicle's last forces
         self.last_publish_wall = time.monotonic()   #: lockstep: the pending odometry was (re)published then
@@ -191,13 +190,15 @@ class SimNode(Node):
         return self.fleet.set_forces(vehicle, forces)
 
     def ready(self) -> bool:
-        """Start ``start_delay`` after every vehicle's ``odom`` has its subscribers and a controller publishes its
-        ``rotor_forces``."""
+        """Start ``start_delay`` after every vehicle's ``odom`` publisher has matched its subscribers and its
+        ``rotor_forces`` subscription a controller's publisher. Matched, not merely discovered (the ROS graph): a
+        message sent to a discovered reader not yet matched is not delivered, and the lockstep then waits forever
+        for its answer (seen with the simulator on Fast DDS and the controller on Cyclone DDS)."""
         if self.started:
             return True
         now = time.monotonic()
-        if not all(self.count_subscribers(odom) >= self.wait_for_subscribers and self.count_publishers(forces) > 0
-                   for odom, forces in zip(self.odom_names, self.forces_names)):
+        if not all(odom.get_subscription_count() >= self.wait_for_subscribers and forces.get_publisher_count() > 0
+                   for odom, forces in zip(self.odom_pubs, self.forces_subs)):
             self.subscribed_since = None
         elif self.subscribed_since is None:
             self.subscribed_since = now
