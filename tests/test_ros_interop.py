@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -32,10 +31,10 @@ NEEDS_JAZZY = pytest.mark.skipif(HAVE_RCLPY and ros_series() != 'jazzy',
 if HAVE_RCLPY:
     import rclpy
 
-    from quad_msgs_bridge.ros_helpers import qos_profile
+    from quad_msgs_bridge.ros_helpers import subscription
 
 from flight_stack.processes import stop_all
-from quad_msgs_bridge.contract import ALL_TOPICS, CLOCK, CONTROL_WRENCH, ODOM, resolve
+from quad_msgs_bridge.contract import ALL_TOPICS, CLOCK, CONTROL_WRENCH, ODOM
 from quad_msgs_bridge.conversions import rclpy_kit
 from quad_msgs_bridge.fast_cdr import decode_odometry
 
@@ -62,7 +61,14 @@ def ros_node(monkeypatch):
 def fly(node, namespace: str, on_wheels: set[str]) -> dict:
     """A lockstep hover flight of the three nodes in ``namespace``, those named in ``on_wheels`` ('sim',
     'trajectory', 'controller') on the ROS 2 wheels, the others on this run's ROS 2; what this node (on this
-    run's ROS 2) received: {'odom': [(stamp [s], position [m, world ENU])], 'wrench': count, 'clock': count}."""
+    run's ROS 2) received: {'odom': [(stamp [s], position [m, world ENU])], 'wrench': count, 'clock': count}.
+
+    The simulator starts once its odom publisher has matched its subscribers: the writer's side. A reader
+    matches a writer on its own side too, and across DDS vendors the two sides may match far apart; a
+    message that reaches a reader not yet matched on its side is lost to it (a Cyclone reader of a Fast DDS
+    simulator never got odometry 0, and one of a Fast DDS controller missed its first 523 answers). So this
+    node's readers are matched on their side before the flight can start: the simulator waits for one more
+    odom subscriber, a gate this node opens only once its own readers report their publishers matched."""
     kit = rclpy_kit()
     received = {'odom': [], 'wrench': 0, 'clock': 0}
 
@@ -73,14 +79,11 @@ def fly(node, namespace: str, on_wheels: set[str]) -> dict:
         sample = decode_odometry(data)
         received['odom'].append((sample.stamp, sample.position))
 
-    def whole_flight(topic):   # a history for every step: the lockstep does not wait for this node to take them
-        return qos_profile(replace(topic.qos, depth=2 * STEPS))
+    def whole_flight(topic, callback):   # a history for every step: the lockstep does not wait for this node
+        return subscription(node, kit, topic, callback, raw=True, depth=2 * STEPS, namespace=namespace)
 
-    subscriptions = [
-        node.create_subscription(kit[ODOM.type], resolve(ODOM, namespace), odometry, whole_flight(ODOM), raw=True),
-        node.create_subscription(kit[CONTROL_WRENCH.type], resolve(CONTROL_WRENCH, namespace), count('wrench'),
-                                 whole_flight(CONTROL_WRENCH), raw=True),
-        node.create_subscription(kit[CLOCK.type], CLOCK.name, count('clock'), whole_flight(CLOCK), raw=True)]
+    subscriptions = [whole_flight(ODOM, odometry), whole_flight(CONTROL_WRENCH, count('wrench')),
+                     whole_flight(CLOCK, count('clock'))]
     start = [0.0, 0.0, 0.5] + [0.0] * 9          # at rest 0.5 m below the hover point: a flight, not a rest
 
     def python(name):
@@ -91,21 +94,37 @@ def fly(node, namespace: str, on_wheels: set[str]) -> dict:
                      {'scenario': 'hover', 'start_time': 0.0}, python=python('trajectory')),
         node_process('controller', 'nnit2fsmc_controller.controller_node', namespace, {},
                      python=python('controller')),
-        # it waits for the controller's and this node's odom subscriptions; it stops stepping at DURATION
+        # it waits for the controller's odom subscription, this node's and the gate; it stops stepping at DURATION
         node_process('sim', 'quad_sim.sim_node', namespace,
-                     {'duration': DURATION, 'initial_state': start, 'wait_for_subscribers': 2},
+                     # start_delay: a margin for the writers' side of this node's readers, which it cannot see
+                     {'duration': DURATION, 'initial_state': start, 'wait_for_subscribers': 3, 'start_delay': 0.5},
                      python=python('sim'))]
-    try:   # take what arrives while the flight runs; the simulator stays
-        # up after the last step, so that nothing it sent is lost with its publishers
+    gate = None
+    try:
+        assert wait_until(lambda: all(s.get_publisher_count() >= 1 for s in subscriptions), timeout=60.0), \
+            ('this node\'s readers never matched their publishers', [p.lines for p in processes])
+        gate = subscription(node, kit, ODOM, lambda _: None, raw=True, depth=1, namespace=namespace)
+        # take what arrives while the flight runs; the simulator stays up after the last step, so that nothing
+        # it sent is lost with its publishers
         take_until(subscriptions, lambda: (received['odom'] and received['odom'][-1][0] >= DURATION - 0.0015
                                            and received['wrench'] >= STEPS and received['clock'] >= STEPS),
                    timeout=120.0)
     finally:
         codes = stop_all(processes)
-        for subscription in subscriptions:
-            node.destroy_subscription(subscription)
+        for taken in subscriptions + ([gate] if gate else []):
+            node.destroy_subscription(taken)
     assert all(code == 0 for code in codes.values()), (codes, [p.lines for p in processes])
     return received
+
+
+def wait_until(condition, timeout: float) -> bool:
+    """Whether ``condition()`` holds within ``timeout`` [s, wall] (it is asked every 10 ms)."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
 
 
 def take_until(subscriptions, condition, timeout: float) -> bool:

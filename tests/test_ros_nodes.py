@@ -23,7 +23,7 @@ if HAVE_RCLPY:
     import rclpy
     from rclpy.qos import QoSProfile
 
-    from quad_msgs_bridge.ros_helpers import qos_profile
+    from quad_msgs_bridge.ros_helpers import qos_profile, subscription
 
 from quad_msgs_bridge.bag.reader import mcap_file
 from flight_stack.fleet import FleetVehicle, fleet_layout
@@ -462,18 +462,11 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
     kit = rclpy_kit()
     odometry, wrench_stamps, diagnostics = {}, [], []
 
-    def deep(topic):   # a reader history for the whole flight: the lockstep does not wait for this node's spin
-        return QoSProfile(reliability=qos_profile(topic.qos).reliability, depth=100_000)
-    ros_node.create_subscription(kit[ODOM.type], resolve(ODOM, namespace),
-                                 lambda msg: odometry.__setitem__(round(odometry_from_msg(msg).stamp * 1e9),
-                                                                  odometry_from_msg(msg)), deep(ODOM))
-    ros_node.create_subscription(kit[CONTROL_WRENCH.type], resolve(CONTROL_WRENCH, namespace),
-                                 lambda msg: wrench_stamps.append(msg.header.stamp.sec * 10 ** 9
-                                                                  + msg.header.stamp.nanosec),
-                                 deep(CONTROL_WRENCH))
-    ros_node.create_subscription(kit[CONTROL_DIAGNOSTICS.type], resolve(CONTROL_DIAGNOSTICS, namespace),
-                                 lambda msg: diagnostics.append(diagnostics_from_msg(msg)),
-                                 deep(CONTROL_DIAGNOSTICS))
+    def deep(topic, callback):   # a reader history for the whole flight: the lockstep does not wait for this node
+        subscription(ros_node, kit, topic, callback, depth=100_000, namespace=namespace)
+    deep(ODOM, lambda msg: odometry.__setitem__(round(odometry_from_msg(msg).stamp * 1e9), odometry_from_msg(msg)))
+    deep(CONTROL_WRENCH, lambda msg: wrench_stamps.append(msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec))
+    deep(CONTROL_DIAGNOSTICS, lambda msg: diagnostics.append(diagnostics_from_msg(msg)))
     start = [0.0, 0.0, 0.5] + [0.0] * 9          # at rest 0.5 m below the hover point: S_z far from 0
     processes = [
         node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,

@@ -18,10 +18,9 @@ pytestmark = [requires_ros, pytest.mark.ros]
 
 if HAVE_RCLPY:
     import rclpy
-    from rclpy.qos import QoSProfile
     from rclpy.serialization import deserialize_message, serialize_message
 
-    from quad_msgs_bridge.ros_helpers import qos_profile
+    from quad_msgs_bridge.ros_helpers import subscription
 
 from flight_stack.fleet import FleetVehicle
 from flight_stack.processes import stop_all
@@ -68,13 +67,13 @@ def test_a_recorded_flight_holds_exactly_the_bytes_that_were_published(ros_node,
     sent: dict[str, list] = {}
     decoded: dict[str, list] = {}
 
-    def subscribe(name, topic):
-        profile = qos_profile(topic.qos)
-        deep = QoSProfile(history=profile.history, depth=100_000, reliability=profile.reliability,
-                          durability=profile.durability)
+    readers = {}
+
+    def subscribe(name, topic):   # a history for the whole flight: the lockstep does not wait for this node
         sent[name], decoded[name] = [], []
-        ros_node.create_subscription(kit[topic.type], name, sent[name].append, deep, raw=True)
-        ros_node.create_subscription(kit[topic.type], name, decoded[name].append, deep)
+        readers[name] = [subscription(ros_node, kit, topic, sent[name].append, raw=True, depth=100_000,
+                                      namespace=namespace),
+                         subscription(ros_node, kit, topic, decoded[name].append, depth=100_000, namespace=namespace)]
 
     for name, topic in resolve_all(topics, ['/' + namespace]):
         if topic is not ODOM:
@@ -86,11 +85,12 @@ def test_a_recorded_flight_holds_exactly_the_bytes_that_were_published(ros_node,
         topics=[t.name for t in topics], quiet=True, extra_odom_subscribers=2))))
     flight.start()
     # odom last, as the recorder does: the simulator starts once this node's odom subscriptions are there, and by
-    # then every other per-step topic's publisher must be discovered, or this node misses its first messages (a
-    # CI run on the wheels got 93 rotor_forces fewer than the bag)
+    # then this node's reader of every other per-step topic must have matched its publisher, or it misses the
+    # first messages (a CI run on the wheels got 93 rotor_forces fewer than the bag when it waited for discovery)
     others = [name for name, topic in resolve_all(topics, ['/' + namespace])
               if topic.qos.durability == 'volatile' and topic is not ODOM]
-    assert spin_until(ros_node, lambda: all(ros_node.count_publishers(name) for name in others), timeout=180.0)
+    assert spin_until(ros_node, lambda: all(reader.get_publisher_count() for name in others
+                                            for reader in readers[name]), timeout=180.0)
     subscribe(f'/{namespace}/odom', ODOM)
     spin_until(ros_node, lambda: not flight.is_alive(), timeout=300.0)
     flight.join()
@@ -195,8 +195,7 @@ def test_a_recorder_behind_at_the_end_of_a_flight_still_gets_every_step(ros_node
     namespace, steps = 'behindrec', 600
     bag = tmp_path / 'bag'
     first_step = []
-    ros_node.create_subscription(rclpy_kit()[ODOM.type], f'/{namespace}/odom', first_step.append,
-                                 qos_profile(ODOM.qos))
+    subscription(ros_node, rclpy_kit(), ODOM, first_step.append, namespace=namespace)
     processes = recorded_hover(namespace, bag, {'duration': steps / 1000.0, 'exit_at_end': True,
                                                 'wait_for_subscribers': 3})
     recorder, sim = processes[0], processes[3]

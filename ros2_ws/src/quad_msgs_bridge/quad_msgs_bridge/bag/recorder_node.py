@@ -30,7 +30,7 @@ numbers (rmw_cyclonedds_cpp in Jazzy) losses cannot be counted: the recorder say
 
 One recorder records a fleet: the contract topics of every vehicle of ``vehicles`` (namespaces
 relative to the node's, by default its own), ``/clock`` and ``/tf`` once. Per-step topics published
-by the controllers must be discovered before ``odom`` is subscribed: a lockstep simulator that waits
+by the controllers must be matched before ``odom`` is subscribed: a lockstep simulator that waits
 for the recorder's ``odom`` subscriptions then starts only when nothing of the flight can be missed.
 SIGINT/SIGTERM stop it cleanly: everything still arriving is taken and the bag is finalized. A
 killed recorder leaves a bag readable up to its last complete chunk (``recover`` finalizes it).
@@ -105,6 +105,7 @@ class RecorderNode(Node):
         self.numbered = True                          #: whether the RMW reports publication sequence numbers
         self._sequences: dict[tuple, int] = {}        #: (topic, publisher gid) -> last publication sequence number
         self._recorded: list[tuple] = []              #: (name, is_clock, subscription handle, type, delivered)
+        self._readers: dict[str, object] = {}        #: topic -> its subscription
         self._published: dict[str, int] = {}          #: topic -> source timestamp of its latest message [ns]
         self._per_step = [name for name, topic in resolve_all(self.topics, self.namespaces)
                           if topic in PER_STEP_TOPICS]
@@ -133,6 +134,7 @@ class RecorderNode(Node):
         delivered: list = []   # what the executor hands over between rounds (when it spins for timers)
         subscription = self.create_subscription(self.kit[topic.type], name,
                                                 lambda data, info: delivered.append((data, info)), profile, raw=True)
+        self._readers[name] = subscription
         entry = (name, topic is CLOCK, subscription.handle, subscription.msg_type, delivered)
         # /clock first: of messages with the same source timestamp, a /clock is taken to come first
         self._recorded.insert(0 if topic is CLOCK else len(self._recorded), entry)
@@ -201,14 +203,19 @@ class RecorderNode(Node):
         self._sequences[key] = sequence
 
     def open_gate(self) -> None:
-        """Subscribe to every odom once every recorded per-step topic of the controllers has a discovered publisher."""
-        per_step = [t for t in self.topics if t.qos.durability == 'volatile' and t not in SIMULATOR_TOPICS]
-        if any(self.count_publishers(name) == 0 for name, _ in resolve_all(per_step, self.namespaces)):
-            return
+        """Subscribe to every odom once this recorder's subscription to every recorded per-step topic of the
+        controllers has matched a publisher, and each to a simulator topic that has a discovered publisher has
+        matched it. Matched on the recorder's own side, not merely discovered (the ROS graph): a reader drops
+        what a writer sends before the reader has matched that writer (seen across DDS vendors)."""
+        for name, topic in resolve_all([t for t in self.topics if t.qos.durability == 'volatile' and t is not ODOM],
+                                       self.namespaces):
+            awaited = self.count_publishers(name) > 0 if topic in SIMULATOR_TOPICS else True
+            if awaited and self._readers[name].get_publisher_count() == 0:
+                return
         self.gate.cancel()
         for name, _ in resolve_all([ODOM], self.namespaces):
             self.subscribe(name, ODOM)
-        self.get_logger().info('controller publishers discovered; recording odom')
+        self.get_logger().info('controller publishers matched; recording odom')
 
     def finish(self) -> None:
         """Write what is still held, finalize the bag (with the count of lost messages, if any), say what it holds."""
