@@ -92,6 +92,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--extra-subscribers', type=int, default=0, metavar='N',
                         help='ROS backend: the simulator also waits for N more odom subscribers before it starts '
                              '(your own `ros2 bag record`, RViz), so they miss nothing of a lockstep flight')
+    parser.add_argument('--record-by', choices=('recorder', 'publishers'), default='recorder',
+                        help='ROS backend: who writes the bag: the record node (one more DDS reader of every topic), '
+                             'or each node logging what it publishes, merged into the bag after the flight '
+                             '(cheaper: docs/BAGS.md)')
     parser.add_argument('--bag', type=Path, default=None,
                         help='record the flight into this rosbag2 (MCAP) folder (default OUT/bag); '
                              'then review it into OUT (report.html, plots/)')
@@ -289,7 +293,7 @@ def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str,
         control_rate=plan.control_rate, bag=bag,
         topics=[t.name for t in plan.topics], mode=args.mode, speed_factor=args.speed_factor,
         extra_odom_subscribers=args.extra_subscribers, vehicle_file=args.vehicle, gains_file=args.gains,
-        settle_time=plan.settle_time, quiet=args.quiet))
+        settle_time=plan.settle_time, quiet=args.quiet, record_by=args.record_by))
     if result.failed_node:
         raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
                             + (f'; the bag is closed: {bag}' if bag_shown else ''),

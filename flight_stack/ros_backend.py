@@ -16,6 +16,7 @@ The summary is computed from the bag: what was observed on the topics.
 """
 from __future__ import annotations
 
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,13 +25,17 @@ from typing import Sequence
 import yaml
 
 from nnit2fsmc_controller.trajectory import make_scenario
-from quad_msgs_bridge.bag.flight_bag import disturbances_label
+from quad_msgs_bridge.bag.flight_bag import disturbances_label, ros_flight_custom_data
+from quad_msgs_bridge.bag.merge import merge_parts
+from quad_msgs_bridge.contract import RECORDED_TOPICS, vehicle_namespaces
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 from .fleet import FleetVehicle, fleet_home
 from .processes import NodeProcess, node_command, source_tree_environment, stop_all, wait_for_exit
 
 
 EXTRA_SUBSCRIBER_DELAY = 1.0   #: [s, wall] the simulator waits once extra odom subscribers are there
+RECORD_BY = ('recorder', 'publishers')   #: who writes a flight's bag (RosFlightConfig.record_by)
 
 
 @dataclass
@@ -53,7 +58,10 @@ class RosFlightConfig:
     settle_time: float = 5.0
     quiet: bool = False
     extra_odom_subscribers: int = 0   #: further odom subscribers the simulator waits for (e.g. a ros2 bag record)
-    record: bool = True       #: False: no recorder process (for timing the bare three-node loop)
+    record: bool = True       #: False: no bag (for timing the bare three-node loop)
+    #: who writes the bag: 'recorder' (the record node, one more reader of every topic) or 'publishers' (each
+    #: node logs what it publishes, merged into the bag after the flight: see quad_msgs_bridge.bag.publication_log)
+    record_by: str = 'recorder'
     publish_tf: bool = True   #: the simulator broadcasts every vehicle's odom -> <ns>/base_link on /tf
 
 
@@ -87,10 +95,17 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     fleet = {'vehicles': names} if len(names) > 1 else {}   # one vehicle: the default, the node's namespace
     initial_states = [value for v in config.vehicles
                       for value in make_scenario(config.scenario, offset=v.offset).initial_state]
+    if config.record_by not in RECORD_BY:
+        raise ValueError(f'record_by {config.record_by!r}: one of {", ".join(RECORD_BY)}')
+    recorder = config.record and config.record_by == 'recorder'
+    parts = part_directory(config.bag) if config.record and config.record_by == 'publishers' else None
+    logged = {'record_dir': str(parts)} if parts else {}    # each node's own publication log
+    if parts is not None:
+        shutil.rmtree(parts, ignore_errors=True)
     nodes = [('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.bag.recorder_node', home,
               {'bag': str(config.bag), 'overwrite': True, 'topics': config.topics, 'controller': config.controller,
                'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time,
-               'disturbances': disturbances_label(config.disturbances), **fleet, **vehicle})] if config.record else []
+               'disturbances': disturbances_label(config.disturbances), **fleet, **vehicle})] if recorder else []
     for v in config.vehicles:
         label = f' {v.namespace}' if fleet else ''
         nodes += [
@@ -99,23 +114,23 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
              # the path start is given in sim time and the node reads no clock after it: no use_sim_time, so it
              # does not wake for every /clock message (that cost a third of the lockstep rate here)
              {'use_sim_time': False, 'scenario': config.scenario, 'duration': config.duration,
-              'setpoint_rate': config.setpoint_rate, 'start_time': 0.0, 'offset': list(v.offset)}),
+              'setpoint_rate': config.setpoint_rate, 'start_time': 0.0, 'offset': list(v.offset), **logged}),
             (f'controller{label}', 'nnit2fsmc_controller', 'nnit2fsmc_controller',
              'nnit2fsmc_controller.controller_node', v.namespace,
              # it stamps with the odometry's stamp and reads no clock (its odometry watchdog runs on the steady
              # clock): no use_sim_time either, which spares a /clock callback per step (11 % of the lockstep rate)
              {'use_sim_time': False, 'controller': config.controller, 'nnit2fsmc.seed': config.seed,
-              'latest_only': config.mode == 'realtime', **vehicle,
+              'latest_only': config.mode == 'realtime', **vehicle, **logged,
               **({'gains_file': str(config.gains_file)} if config.gains_file else {})})]
     nodes.append(
         ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node', home,
          {'duration': config.duration, 'exit_at_end': True, 'disturbances': config.disturbances,
           'physics_rate': config.physics_rate, 'odometry_rate': config.control_rate, 'mode': config.mode,
           'speed_factor': config.speed_factor,
-          'wait_for_subscribers': (2 if config.record else 1) + config.extra_odom_subscribers,
+          'wait_for_subscribers': (2 if recorder else 1) + config.extra_odom_subscribers,
           # an outside recorder subscribes to odom among its other topics: give those time to match too
           'start_delay': EXTRA_SUBSCRIBER_DELAY if config.extra_odom_subscribers else 0.0,
-          'initial_state': initial_states, 'publish_tf': config.publish_tf, **fleet, **vehicle}))
+          'initial_state': initial_states, 'publish_tf': config.publish_tf, **fleet, **vehicle, **logged}))
     processes: list[NodeProcess] = []
     started = time.monotonic()
     failed = None
@@ -135,9 +150,14 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     except (KeyboardInterrupt, TimeoutError) as stop:
         failed = 'interrupted' if isinstance(stop, KeyboardInterrupt) else f'timeout ({stop})'
     finally:
-        codes = stop_all(processes[1:])
-        if processes:
-            codes[processes[0].name] = processes[0].stop(grace=30.0)
+        if recorder:   # the recorder last: it drains what the others still send
+            codes = stop_all(processes[1:])
+            if processes:
+                codes[processes[0].name] = processes[0].stop(grace=30.0)
+        else:
+            codes = stop_all(processes)
+        if parts is not None:
+            merge_publication_logs(config, parts, home, names)
     wall = time.monotonic() - started
     for name, code in codes.items():
         # a node stopped by our SIGINT exits 0; anything else (a crash, a kill) is a failure
@@ -145,3 +165,24 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
             failed = name
     report = next((line for line in reversed(processes[-1].lines) if 'steps/s' in line), '') if processes else ''
     return RosFlightResult(wall, failed, codes, report, tuple(processes[-1].lines) if processes else ())
+
+
+def part_directory(bag: Path) -> Path:
+    """Where the nodes of a flight recorded by its publishers put their part bags: beside ``bag``."""
+    return bag.with_name(f'{bag.name}.parts')
+
+
+def merge_publication_logs(config: RosFlightConfig, parts: Path, home: str, names: list[str]) -> None:
+    """The flight's bag at ``config.bag`` from the nodes' part bags in ``parts``, which then go. A part a killed
+    node left unfinished is merged up to its last complete chunk, and said so."""
+    params, _ = load_vehicle_file(config.vehicle_file)
+    namespaces = vehicle_namespaces('/' + home.strip('/'), names)
+    known = {topic.name: topic for topic in RECORDED_TOPICS}
+    custom = ros_flight_custom_data(params, config.settle_time, config.seed, namespaces,
+                                    controller=config.controller, scenario=config.scenario,
+                                    disturbances=disturbances_label(config.disturbances))
+    result = merge_parts(parts, config.bag, [known[name] for name in config.topics], namespaces, custom,
+                         overwrite=True)
+    for part, reason in result.cut.items():
+        print(f'publication log {part} ends early ({reason}): merged up to its last complete chunk', flush=True)
+    shutil.rmtree(parts)

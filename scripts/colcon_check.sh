@@ -12,7 +12,8 @@ rm -rf build install log
 "${colcon[@]}" test-result --verbose
 status=0
 for executable in quad_sim/quad_sim nnit2fsmc_controller/nnit2fsmc_controller nnit2fsmc_controller/trajectory \
-                  quad_msgs_bridge/review quad_msgs_bridge/record quad_msgs_bridge/recover quad_msgs_bridge/rosbag2_qos; do
+                  quad_msgs_bridge/review quad_msgs_bridge/record quad_msgs_bridge/recover quad_msgs_bridge/merge \
+                  quad_msgs_bridge/rosbag2_qos; do
   package=${executable%%/*}
   if [ -x "install/$package/lib/$executable" ]; then
     echo "installed: install/$package/lib/$executable"
@@ -26,7 +27,7 @@ done
 # The installed executables run with every import they need: the bag tools without ROS; with ROS, each node
 # through `ros2 run` with its installed params file, refusing an invalid value (exit 2, naming it).
 set +u; source install/setup.bash; set -u
-for tool in review recover rosbag2_qos; do
+for tool in review recover merge rosbag2_qos; do
   install/quad_msgs_bridge/lib/quad_msgs_bridge/$tool --help >/dev/null
   echo "runs: $tool --help"
 done

@@ -27,6 +27,7 @@ setup(
         'record = quad_msgs_bridge.bag.recorder_node:main',
         'review = quad_msgs_bridge.review.command:main',
         'recover = quad_msgs_bridge.bag.recover:recover_main',
+        'merge = quad_msgs_bridge.bag.merge:merge_main',
         'rosbag2_qos = quad_msgs_bridge.bag.metadata:qos_overrides_main',
     ]},
 )

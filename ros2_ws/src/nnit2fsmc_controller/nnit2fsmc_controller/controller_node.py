@@ -35,7 +35,7 @@ from quad_msgs_bridge.fast_cdr import (decode_odometry, diagnostics_encoder, pos
                                        wrench_encoder)
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.reference import SetpointPath
-from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
+from quad_msgs_bridge.ros_helpers import declare, publication_log, publisher, run_node, subscription
 from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.timebase import nanoseconds, seconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
@@ -82,10 +82,12 @@ class ControllerNode(Node):
             raise ParameterError(f'controller gains: {error}') from error
         compile_kernels(kind, self.params, self.gains)   # before subscribing: the first answer is not slower
         self.add_on_set_parameters_callback(self.on_set_parameters)
-        self.forces_pub = publisher(self, kit, ROTOR_FORCES)
-        self.wrench_pub = publisher(self, kit, CONTROL_WRENCH)
-        self.reference_pub = publisher(self, kit, CONTROL_REFERENCE)
-        self.diagnostics_pub = publisher(self, kit, CONTROL_DIAGNOSTICS)
+        self.odometry_ns = 0     #: [ns, sim] stamp of the latest odometry taken: its answers are logged at it
+        self.publication_log = publication_log(self, lambda: self.odometry_ns)
+        self.forces_pub = publisher(self, kit, ROTOR_FORCES, log=self.publication_log)
+        self.wrench_pub = publisher(self, kit, CONTROL_WRENCH, log=self.publication_log)
+        self.reference_pub = publisher(self, kit, CONTROL_REFERENCE, log=self.publication_log)
+        self.diagnostics_pub = publisher(self, kit, CONTROL_DIAGNOSTICS, log=self.publication_log)
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs;
         # in realtime (latest_only) a controller that falls behind skips to the newest odometry
         self.encode_forces = rotor_forces_encoder()
@@ -120,6 +122,7 @@ class ControllerNode(Node):
             self.publish_forces(self.last_forces)
             return
         stamp_ns = nanoseconds(sample.stamp)
+        self.odometry_ns = stamp_ns
         if stamp_ns == self.last_answered_ns:
             return      # a repeat of the odometry already answered
         if stamp_ns < self.last_answered_ns:

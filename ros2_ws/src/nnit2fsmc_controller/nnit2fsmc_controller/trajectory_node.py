@@ -12,7 +12,7 @@ from rclpy.node import Node
 from quad_msgs_bridge.contract import REFERENCE_PATH, SETPOINTS, base_frame
 from quad_msgs_bridge.conversions import MessageKit, path_msg, setpoints_msg
 from quad_msgs_bridge.reference import SetpointPath
-from quad_msgs_bridge.ros_helpers import declare, publisher, run_node
+from quad_msgs_bridge.ros_helpers import declare, publication_log, publisher, run_node
 from quad_msgs_bridge.timebase import seconds
 from quad_msgs_bridge.vehicle_params import ParameterError
 
@@ -36,8 +36,12 @@ class TrajectoryNode(Node):
             start = seconds(self.get_clock().now().nanoseconds)
         path = SetpointPath.sampled(trajectory, start, trajectory.duration, rate)
         body = base_frame(self.get_namespace())
-        publisher(self, kit, SETPOINTS).publish(setpoints_msg(kit, path, child_frame_id=body))
-        publisher(self, kit, REFERENCE_PATH).publish(path_msg(kit, path))
+        # logged at the node clock's time under use_sim_time, else at sim time 0: it publishes before the flight
+        sim_time = self.get_parameter('use_sim_time').value
+        self.publication_log = publication_log(self, lambda: self.get_clock().now().nanoseconds if sim_time else 0)
+        publisher(self, kit, SETPOINTS, log=self.publication_log).publish(
+            setpoints_msg(kit, path, child_frame_id=body))
+        publisher(self, kit, REFERENCE_PATH, log=self.publication_log).publish(path_msg(kit, path))
         self.get_logger().info(f'{scenario}: {len(path.times)} setpoints from t={path.start:.3f} s '
                                f'to {path.end:.3f} s published')
 

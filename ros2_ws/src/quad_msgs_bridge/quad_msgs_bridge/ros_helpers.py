@@ -1,6 +1,6 @@
 """rclpy side of the contract, shared by the three nodes: QoS profiles, validated parameters, main().
 
-This is the bridge's only module that imports rclpy; the cores never import it.
+The bridge's node-side modules (this one, bag.recorder_node, bag.publication_log) import rclpy; the cores never do.
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.signals import SignalHandlerOptions
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
+from quad_msgs_bridge.bag.publication_log import PublicationLog, part_path
 from quad_msgs_bridge.contract import QosSpec, TopicSpec, resolve
 from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
 from quad_msgs_bridge.runtime import freeze_long_lived_objects
@@ -39,9 +40,28 @@ def _topic_name(topic: TopicSpec, namespace: str | None) -> str:
     return topic.name if namespace is None else resolve(topic, namespace)
 
 
-def publisher(node: Node, kit: MessageKit, topic: TopicSpec, namespace: str | None = None):
-    """A publisher of a contract topic, relative names resolved in ``namespace`` (default: the node's)."""
-    return node.create_publisher(kit[topic.type], _topic_name(topic, namespace), qos_profile(topic.qos))
+def publisher(node: Node, kit: MessageKit, topic: TopicSpec, namespace: str | None = None,
+              log: PublicationLog | None = None):
+    """A publisher of a contract topic, relative names resolved in ``namespace`` (default: the node's); with a
+    ``log`` (see :func:`publication_log`), one that records what it publishes there."""
+    created = node.create_publisher(kit[topic.type], _topic_name(topic, namespace), qos_profile(topic.qos))
+    return created if log is None else log.recording(created, topic)
+
+
+def publication_log(node: Node, sim_time_ns: Callable[[], int]) -> PublicationLog | None:
+    """Declare the node's ``record_dir`` parameter; if set, the log its publishers record into (its part bag in
+    that directory: see quad_msgs_bridge.bag.publication_log), else None. ``sim_time_ns()``: the log time [ns,
+    sim] of a message published now. :func:`run_node` closes the log of a node that keeps it as
+    ``node.publication_log``."""
+    record_dir = declare(node, 'record_dir', '', 'directory for this node to record what it publishes into, as '
+                         'its own part bag (merged after the flight by `ros2 run quad_msgs_bridge merge`); empty: none',
+                         read_only='the part bag is opened when the node starts')
+    if not record_dir:
+        return None
+    try:
+        return PublicationLog(part_path(record_dir, node.get_fully_qualified_name()), sim_time_ns)
+    except OSError as error:
+        raise ParameterError(f'parameter record_dir: {error}') from error
 
 
 def subscription(node: Node, kit: MessageKit, topic: TopicSpec, callback: Callable, raw: bool = False,
@@ -156,5 +176,7 @@ def run_node(make_node: Callable[[MessageKit], Node], argv: list[str] | None = N
             if node.context.ok():
                 wait_for_acknowledgements(node)
             node.destroy_node()
+            if getattr(node, 'publication_log', None) is not None:
+                node.publication_log.close()
         rclpy.try_shutdown()
     return code

@@ -35,8 +35,9 @@ from rclpy.node import Node
 from quad_msgs_bridge.contract import CLOCK, ODOM, ODOM_FRAME, ROTOR_FORCES, TF, base_frame, resolve, vehicle_namespaces
 from quad_msgs_bridge.conversions import MessageKit
 from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder, tf_encoder
-from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription, wait_for_acknowledgements
-from quad_msgs_bridge.timebase import stamp_fields
+from quad_msgs_bridge.ros_helpers import (declare, publication_log, publisher, run_node, subscription,
+                                          wait_for_acknowledgements)
+from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .fleet import Fleet, LockstepAnswers, split_initial_states
@@ -102,8 +103,9 @@ class SimNode(Node):
         self.names = [namespace.strip('/') or '/' for namespace in namespaces]   #: for the logs
         self.hover_forces = (params.hover_force,) * 4
         frames = [base_frame(namespace) for namespace in namespaces]
-        self.clock_pub = publisher(self, kit, CLOCK)
-        self.odom_pubs = [publisher(self, kit, ODOM, namespace) for namespace in namespaces]
+        self.publication_log = publication_log(self, lambda: nanoseconds(self.fleet.time))
+        self.clock_pub = publisher(self, kit, CLOCK, log=self.publication_log)
+        self.odom_pubs = [publisher(self, kit, ODOM, namespace, log=self.publication_log) for namespace in namespaces]
         self.odom_names = [resolve(ODOM, namespace) for namespace in namespaces]
         self.tf_pub = self.tf_publisher(kit) if publish_tf else None
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs
@@ -138,7 +140,7 @@ class SimNode(Node):
     def tf_publisher(self, kit: MessageKit):
         """The ``/tf`` publisher, or None (said once) where tf2_msgs is not installed."""
         try:
-            return publisher(self, kit, TF)
+            return publisher(self, kit, TF, log=self.publication_log)
         except ImportError as error:
             self.get_logger().warning(f'{TF.type} is not installed ({error}): running without TF, nothing on {TF.name}')
             return None

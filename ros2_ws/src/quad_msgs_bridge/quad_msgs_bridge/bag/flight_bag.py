@@ -71,6 +71,16 @@ def flight_custom_data(params: VehicleParams, settle_time: float, **info) -> dic
             **{key: str(value) for key, value in info.items()}}
 
 
+def ros_flight_custom_data(params: VehicleParams, settle_time: float, seed: int, namespaces: Sequence[str],
+                           **labels: str) -> dict[str, str]:
+    """Custom data of a bag of a flight over ROS (recorded by the ``record`` node or merged from the nodes' own
+    publication logs): ``flight_custom_data`` with the vehicles' absolute ``namespaces`` and the non-empty labels
+    (controller, scenario, disturbances)."""
+    vehicles = {'namespace': namespaces[0]} if len(namespaces) == 1 else {'vehicles': ','.join(namespaces)}
+    return flight_custom_data(params, settle_time, backend='ros', seed=seed, **vehicles,
+                              **{key: value for key, value in labels.items() if value})
+
+
 class FlightBag:
     """A bag fed by the embedded flight loop; a context manager that closes the bag.
 

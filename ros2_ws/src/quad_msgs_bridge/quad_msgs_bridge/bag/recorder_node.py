@@ -50,7 +50,7 @@ from quad_msgs_bridge.bag.writer import BagWriter
 from quad_msgs_bridge.contract import (CLOCK, ODOM, PER_STEP_TOPICS, RECORDED_TOPICS, SIMULATOR_TOPICS, TopicSpec,
                                        resolve_all, vehicle_namespaces)
 from quad_msgs_bridge.conversions import MessageKit, rclpy_kit
-from quad_msgs_bridge.bag.flight_bag import flight_custom_data
+from quad_msgs_bridge.bag.flight_bag import ros_flight_custom_data
 from quad_msgs_bridge.ros_helpers import declare, init_ros, qos_profile
 from quad_msgs_bridge.runtime import freeze_long_lived_objects
 from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND
@@ -93,10 +93,7 @@ class RecorderNode(Node):
             raise ParameterError(f'parameter topics: {unknown} are not contract topics ({", ".join(known)})')
         self.topics = [known[n] for n in topic_names if self.type_installed(kit, known[n])]
         self.namespaces = vehicle_namespaces(self.get_namespace(), names)
-        vehicles = {'namespace': self.namespaces[0]} if len(self.namespaces) == 1 else \
-            {'vehicles': ','.join(self.namespaces)}
-        custom = flight_custom_data(params, settle_time, backend='ros', seed=seed, **vehicles,
-                                    **{k: v for k, v in labels.items() if v})
+        custom = ros_flight_custom_data(params, settle_time, seed, self.namespaces, **labels)
         self.writer = BagWriter(bag, self.topics, self.namespaces, custom_data=custom, overwrite=overwrite)
         self.kit = kit
         self.clock_ns: int | None = 0 if CLOCK in self.topics else None    #: sim time of the latest /clock [ns]

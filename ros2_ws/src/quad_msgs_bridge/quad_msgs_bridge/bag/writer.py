@@ -104,21 +104,28 @@ class BagWriter:
         self.topics: list[TopicEntry] = []
         self._types: dict[str, str] = {}
         self._channels: dict[str, int] = {}
-        schemas: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
         namespaces = [namespace] if isinstance(namespace, str) else namespace
         for name, spec in resolve_all(topics, namespaces):
-            entry = TopicEntry(name, spec.type, offered_qos_profiles(spec.qos), self.typestore.hash_rihs01(spec.type))
-            if spec.type not in schemas:
-                msgdef, _ = self.typestore.generate_msgdef(spec.type, ros_version=2)
-                schemas[spec.type] = self._file.add_schema(spec.type, 'ros2msg', msgdef.encode())
-            self._channels[name] = self._file.add_channel(name, 'cdr', schemas[spec.type], channel_metadata(entry))
-            self._types[name] = spec.type
-            self.topics.append(entry)
+            self.add_topic(name, spec)
         if self.custom_data:
             self._file.add_metadata(CUSTOM_DATA_RECORD, self.custom_data)
         self._file.flush()
         write_bag_metadata(self.path, bag_information(self._file, self.topics, list(self._channels.values()),
                                                       self.custom_data))
+
+    def add_topic(self, name: str, spec: TopicSpec) -> None:
+        """Record ``spec`` under the absolute ``name`` too (a channel with its schema, offered QoS and type hash);
+        a topic already recorded is left as it is. The bag's ``metadata.yaml`` lists it from :meth:`close`."""
+        if name in self._channels:
+            return
+        entry = TopicEntry(name, spec.type, offered_qos_profiles(spec.qos), self.typestore.hash_rihs01(spec.type))
+        if spec.type not in self._schemas:
+            msgdef, _ = self.typestore.generate_msgdef(spec.type, ros_version=2)
+            self._schemas[spec.type] = self._file.add_schema(spec.type, 'ros2msg', msgdef.encode())
+        self._channels[name] = self._file.add_channel(name, 'cdr', self._schemas[spec.type], channel_metadata(entry))
+        self._types[name] = spec.type
+        self.topics.append(entry)
 
     # --- writing ----------------------------------------------------------------------------
     def topic_names(self) -> list[str]:
