@@ -4,14 +4,15 @@
 Prints: the ping-pong round trips/s (the ceiling of one simulator-controller pair); then, for each
 fleet size of --vehicles (one simulator, a trajectory and a controller node per vehicle), the lockstep
 paper flight's steps/s without the recorder, without the recorder and without TF (where tf2_msgs is
-installed), and with the recorder, each as a share of that ceiling; for the first recorded flight,
+installed), with the recorder, and logged by its publishers (each node writes what it publishes, merged
+after the flight: fly_ros record_by='publishers'), each as a share of that ceiling; for the first recorded flight,
 each vehicle's odometry-to-force latency (median, p99, from the recorded publish times) and its
 largest difference from the embedded flight of that vehicle alone (same offset copy of the scenario)
 in any odometry value and in each summary metric.
 
 --repeats N flies everything N times in turns (the ping-pong too) and ends with a table of the best
 run of each (the least disturbed by other load on the machine) and the median, as shares of the
-ceiling, with the recording overhead (1 - rate with the recorder / rate without). --against TREE
+ceiling, with the recording overhead (1 - rate recorded / rate without recording). --against TREE
 also flies every flight with the source tree at TREE (e.g. a checkout of an older commit), in turns
 with this one: a before/after comparison side by side in one run. Each flight runs in its own Python
 process with its tree's packages on the path.
@@ -53,6 +54,7 @@ from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
 
 NAMESPACE = 'bench'
 SETTLE_TIME = 5.0
+RECORDED = {'recorder': 'with recorder', 'publishers': 'publishers log'}   #: fly_ros record_by -> flight label
 
 #: one lockstep flight with the packages of the tree in argv[1]; argv[2]: its settings as JSON; prints its steps/s
 FLIGHT = """
@@ -67,19 +69,20 @@ s = json.loads(sys.argv[2])
 result = fly_ros(RosFlightConfig(
     vehicles=fleet_layout(s['vehicles'], s['namespace']), controller=s['controller'], scenario='paper',
     duration=s['duration'], disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0, bag=Path(s['bag']),
-    topics=[t.name for t in RECORDED_TOPICS], settle_time=s['settle_time'], quiet=True, record=s['record'],
-    publish_tf=s['tf']))
+    topics=[t.name for t in RECORDED_TOPICS], settle_time=s['settle_time'], quiet=True,
+    record=s['record_by'] is not None, publish_tf=s['tf'], **({'record_by': s['record_by']} if s['record_by'] else {})))
 if result.failed_node:
     sys.exit(f'flight failed: {result}')
 print('RATE', re.search(r'([0-9.]+) steps/s', result.sim_report).group(1))
 """
 
 
-def fly_lockstep(tree: Path, vehicles: int, controller: str, duration: float, bag: Path, record: bool,
+def fly_lockstep(tree: Path, vehicles: int, controller: str, duration: float, bag: Path, record_by: str | None,
                  tf: bool) -> float:
-    """Steps/s of one lockstep paper flight of ``vehicles`` flown with the source tree at ``tree``."""
+    """Steps/s of one lockstep paper flight of ``vehicles`` flown with the source tree at ``tree``, its bag written
+    by ``record_by`` (fly_ros: 'recorder', 'publishers'; None: no bag)."""
     settings = dict(vehicles=vehicles, namespace=NAMESPACE, controller=controller, duration=duration, bag=str(bag),
-                    settle_time=SETTLE_TIME, record=record, tf=tf)
+                    settle_time=SETTLE_TIME, record_by=record_by, tf=tf)
     done = subprocess.run([sys.executable, '-c', FLIGHT, str(tree), json.dumps(settings)], capture_output=True,
                           text=True)
     match = re.search(r'^RATE ([0-9.]+)$', done.stdout, re.MULTILINE)
@@ -130,6 +133,11 @@ def compare_with_embedded(ros_bag: Path, vehicle: FleetVehicle, controller: str,
               f'difference {abs(metrics[0]["chattering"][name] - value):.3g}')
 
 
+def logs_publications(tree: Path) -> bool:
+    """Whether the source tree at ``tree`` has the nodes' publication logs (fly_ros record_by)."""
+    return 'record_by' in (tree / 'flight_stack' / 'ros_backend.py').read_text()
+
+
 def print_table(ceilings: list[float], rates: dict, trees: list[tuple[str, Path]], repeats: int) -> None:
     """The best and median run of each flight against the best and median ceiling, with the recording overhead."""
     best_ceiling, median_ceiling = max(ceilings), statistics.median(ceilings)
@@ -142,7 +150,7 @@ def print_table(ceilings: list[float], rates: dict, trees: list[tuple[str, Path]
         line = (f'{count:>8}  {tree:<8} {label:<19} {best:12.0f} {100 * best / best_ceiling:8.1f}% '
                 f'{median:8.0f} {100 * median / median_ceiling:8.1f}%')
         bare = rates.get((count, tree, 'no recorder'))
-        if label == 'with recorder' and bare:
+        if label in RECORDED.values() and bare:
             line += f'  {100 * (1 - best / max(bare)):5.1f} % / {100 * (1 - median / statistics.median(bare)):5.1f} %'
         print(line)
     if len(trees) > 1:
@@ -161,10 +169,10 @@ def main() -> None:
                         help='no latency figures and no comparison with the embedded flight')
     args = parser.parse_args()
     trees = [('this', ROOT)] + ([('against', args.against.resolve())] if args.against else [])
-    flights = [('no recorder', False, True)]
+    flights = [('no recorder', None, True)]
     if importlib.util.find_spec('tf2_msgs') is not None:   # without tf2_msgs no flight has TF: nothing to compare
-        flights.append(('no recorder, no TF', False, False))
-    flights.append(('with recorder', True, True))
+        flights.append(('no recorder, no TF', None, False))
+    flights += [(label, record_by, True) for record_by, label in RECORDED.items()]
     ceilings: list[float] = []
     rates: dict[tuple, list[float]] = {}
     for repeat in range(args.repeats):
@@ -172,16 +180,19 @@ def main() -> None:
         ceilings.append(ceiling)
         for count in args.vehicles:
             vehicles = fleet_layout(count, NAMESPACE)
-            for label, record, tf in flights:
+            for label, record_by, tf in flights:
                 for tree_name, tree in trees:
+                    if record_by == 'publishers' and tree_name == 'against' and not logs_publications(tree):
+                        continue
                     with tempfile.TemporaryDirectory() as tmp:
                         bag = Path(tmp) / 'bag'
-                        rate = fly_lockstep(tree, count, args.controller, args.duration, bag, record, tf)
+                        rate = fly_lockstep(tree, count, args.controller, args.duration, bag, record_by, tf)
                         rates.setdefault((count, tree_name, label), []).append(rate)
                         print(f'lockstep {args.controller}, {count} vehicle(s), {tree_name:<7} {label:18s}: '
                               f'{rate:7.0f} steps/s = {100 * rate / ceiling:5.1f} % of the ping-pong ceiling',
                               flush=True)
-                        if record and repeat == 0 and tree_name == 'this' and not args.skip_embedded:
+                        if record_by == 'recorder' and repeat == 0 and tree_name == 'this' \
+                                and not args.skip_embedded:
                             for vehicle in vehicles:
                                 timing = message_timing(bag, vehicle.namespace)
                                 print(f'  {vehicle.namespace}: odom->forces latency median '

@@ -92,10 +92,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--extra-subscribers', type=int, default=0, metavar='N',
                         help='ROS backend: the simulator also waits for N more odom subscribers before it starts '
                              '(your own `ros2 bag record`, RViz), so they miss nothing of a lockstep flight')
-    parser.add_argument('--record-by', choices=('recorder', 'publishers'), default='recorder',
-                        help='ROS backend: who writes the bag: the record node (one more DDS reader of every topic), '
-                             'or each node logging what it publishes, merged into the bag after the flight '
-                             '(cheaper: docs/BAGS.md)')
+    parser.add_argument('--record-by', choices=('recorder', 'publishers'), default='publishers',
+                        help='ROS backend: who writes the bag: each node logging what it publishes, merged into '
+                             'the bag after the flight (the default), or the record node (one more DDS reader of '
+                             'every topic: a lockstep step about 35 %% slower; docs/BAGS.md)')
     parser.add_argument('--bag', type=Path, default=None,
                         help='record the flight into this rosbag2 (MCAP) folder (default OUT/bag); '
                              'then review it into OUT (report.html, plots/)')

@@ -1,16 +1,21 @@
 """ROS backend: each node in its own process, in a namespace, like ``ros2 launch`` would start them.
 
-One vehicle or a fleet on one sim clock (see :mod:`.fleet`): one recorder and one simulator for all
-(a lone vehicle's in its namespace, a fleet's in the vehicles' parent namespace), and per vehicle a
-trajectory node (its offset copy of the scenario) and a controller node in the vehicle's namespace.
-Order: the recorder first (it records what really goes over the topics), then each vehicle's
-trajectory and controller, then the simulator. In lockstep the simulator waits for two subscribers
-of each vehicle's ``odom`` (its controller and the recorder) and the recorder only subscribes to
-``odom`` once it has discovered every controller's publishers, so the bag holds every step. The
-flight ends when the simulator has reached the duration and exits; the others are then stopped
-together with SIGINT (then SIGTERM, SIGKILL), the recorder last so that it drains what is still in
-flight and finalizes the bag. If any node dies first (named with its vehicle in a fleet:
+One vehicle or a fleet on one sim clock (see :mod:`.fleet`): one simulator for all (a lone vehicle's in its
+namespace, a fleet's in the vehicles' parent namespace), and per vehicle a trajectory node (its offset copy of
+the scenario) and a controller node in the vehicle's namespace; each vehicle's trajectory and controller start
+before the simulator. The flight ends when the simulator has reached the duration and exits; the others are then
+stopped together with SIGINT (then SIGTERM, SIGKILL). If any node dies first (named with its vehicle in a fleet:
 ``controller uav2``), the rest are stopped the same way and the flight is reported as failed.
+
+Who writes the bag (``record_by``):
+
+- ``'publishers'`` (the default): every node logs what it publishes into its own part bag in ``BAG.parts``
+  (quad_msgs_bridge.bag.publication_log); once every node has stopped, the parts are merged into the bag (a
+  killed node's up to its last complete chunk) and removed.
+- ``'recorder'``: one recorder for all, started first (it records what really goes over the topics). In lockstep
+  the simulator waits for two subscribers of each vehicle's ``odom`` (its controller and the recorder), and the
+  recorder only subscribes to ``odom`` once its subscriptions have matched every controller's publishers, so the
+  bag holds every step. It is stopped last, so that it drains what is still in flight and finalizes the bag.
 
 The summary is computed from the bag: what was observed on the topics.
 """
@@ -59,9 +64,9 @@ class RosFlightConfig:
     quiet: bool = False
     extra_odom_subscribers: int = 0   #: further odom subscribers the simulator waits for (e.g. a ros2 bag record)
     record: bool = True       #: False: no bag (for timing the bare three-node loop)
-    #: who writes the bag: 'recorder' (the record node, one more reader of every topic) or 'publishers' (each
-    #: node logs what it publishes, merged into the bag after the flight: see quad_msgs_bridge.bag.publication_log)
-    record_by: str = 'recorder'
+    #: who writes the bag: 'publishers' (each node logs what it publishes, merged into the bag after the flight:
+    #: see quad_msgs_bridge.bag.publication_log) or 'recorder' (the record node, one more reader of every topic)
+    record_by: str = 'publishers'
     publish_tf: bool = True   #: the simulator broadcasts every vehicle's odom -> <ns>/base_link on /tf
 
 
@@ -156,7 +161,7 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
                 codes[processes[0].name] = processes[0].stop(grace=30.0)
         else:
             codes = stop_all(processes)
-        if parts is not None:
+        if parts is not None and parts.is_dir():    # no directory: no node got as far as opening its log
             merge_publication_logs(config, parts, home, names)
     wall = time.monotonic() - started
     for name, code in codes.items():

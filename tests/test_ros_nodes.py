@@ -143,6 +143,9 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
 #: [s, sim] the earliest end of a killed controller's record: it is killed once /clock says 3 s, possibly before it
 #: answered the 3 s odometry, so its last complete control step may be the one before
 KILLED_RECORD_ENDS_AFTER = 3.0 - control_period(load_gains()) - 1e-9
+#: [s, sim] ... where its answers come from its own publication log (run_stack.py --record-by publishers, the
+#: default): its open chunk went with it (publication_log.LOG_CHUNK_SIZE: about 0.1 s of its answers)
+KILLED_LOG_ENDS_AFTER = KILLED_RECORD_ENDS_AFTER - 0.5
 
 
 def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str, tmp_path) -> tuple[int, str, Path]:
@@ -182,14 +185,23 @@ def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str,
     return stack.returncode, output, bag
 
 
-def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(ros_node, tmp_path):
+@pytest.mark.parametrize('record_by', ['recorder', 'publishers'])
+def test_a_killed_node_stops_the_stack_and_the_entry_script_fails(ros_node, tmp_path, record_by):
+    """The bag stays readable, a prefix of the flight: the recorder finalizes what it had; the publication logs
+    are merged, the killed controller's up to its last complete chunk (said so)."""
     from quad_msgs_bridge.review.flight_from_bag import read_flight
 
-    code, output, bag = kill_a_controller_mid_flight(ros_node, ['--namespace', 'killed'], 'killed', tmp_path)
+    namespace = f'killed_{record_by}'
+    code, output, bag = kill_a_controller_mid_flight(ros_node, ['--namespace', namespace, '--record-by', record_by],
+                                                     namespace, tmp_path)
     assert code == 1, output
     assert 'error: the flight failed: controller (' in output
-    flight = read_flight(bag)   # the recorder finalized what it had: readable, a prefix of the flight
-    assert KILLED_RECORD_ENDS_AFTER <= flight.record.time[-1] < 59.0
+    flight = read_flight(bag)
+    if record_by == 'recorder':
+        assert KILLED_RECORD_ENDS_AFTER <= flight.record.time[-1] < 59.0
+    else:
+        assert f'publication log {namespace}.nnit2fsmc_controller ends early' in output
+        assert KILLED_LOG_ENDS_AFTER <= flight.record.time[-1] < 59.0
 
 
 def odometry_values(sample) -> list[float]:
@@ -267,9 +279,10 @@ def test_a_dead_controller_fails_the_fleet_flight_by_name_and_the_bag_stays_read
                                                      'deadfleet/uav2', tmp_path)
     assert code == 1, output
     assert 'error: the flight failed: controller deadfleet/uav2 (' in output
-    for name in ('uav1', 'uav2'):   # the recorder finalized what it had: each vehicle a readable prefix of its flight
+    assert 'publication log deadfleet.uav2.nnit2fsmc_controller ends early' in output   # --record-by publishers
+    for name in ('uav1', 'uav2'):   # each vehicle a readable prefix of its flight
         flight = read_flight(bag, namespace=f'deadfleet/{name}')
-        assert KILLED_RECORD_ENDS_AFTER <= flight.record.time[-1] < 59.0
+        assert (KILLED_RECORD_ENDS_AFTER if name == 'uav1' else KILLED_LOG_ENDS_AFTER) <= flight.record.time[-1] < 59.0
 
 
 def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_a_step_only_to_a_new_reader(ros_node):
