@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
 from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
@@ -107,3 +108,37 @@ def test_the_merge_command_merges_and_refuses_a_part_that_is_no_mcap_file(tmp_pa
     assert merge_main([str(tmp_path / 'parts'), str(tmp_path / 'bag2')]) == 2
     assert 'not an MCAP file' in capsys.readouterr().err
 
+
+
+class Sent:
+    """A stand-in for an rclpy publisher (no ROS here): its topic name and what it was given."""
+
+    def __init__(self, topic_name: str):
+        self.topic_name = topic_name
+        self.sent = []
+
+    def publish(self, data):
+        self.sent.append(data)
+
+    def get_subscription_count(self) -> int:
+        return 7
+
+
+def test_a_recording_publisher_publishes_and_logs_the_same_bytes_at_the_sim_time_and_refuses_message_objects(tmp_path):
+    from quad_msgs_bridge.bag.publication_log import PublicationLog, part_path
+    sim_time = [0]
+    log = PublicationLog(part_path(tmp_path / 'parts', '/quad/quad_sim'), lambda: sim_time[0])
+    publisher = Sent(CLOCK.name)
+    clock = log.recording(publisher, CLOCK)
+    encode = clock_encoder()
+    for k in range(5):
+        sim_time[0] = k * STEP_NS
+        clock.publish(encode(0, k * STEP_NS))
+    with pytest.raises(TypeError, match='publishes CDR bytes'):
+        clock.publish(object())
+    assert clock.get_subscription_count() == 7          # the rest is the publisher's
+    log.close()
+    assert (tmp_path / 'parts' / 'quad.quad_sim').is_dir()
+    logged = read(tmp_path / 'parts' / 'quad.quad_sim')
+    assert [m[3] for m in logged] == publisher.sent and len(publisher.sent) == 5
+    assert [m[1] for m in logged] == [k * STEP_NS for k in range(5)]

@@ -10,7 +10,8 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from quad_msgs_bridge.contract import REFERENCE_PATH, SETPOINTS, base_frame
-from quad_msgs_bridge.conversions import MessageKit, path_msg, setpoints_msg
+from quad_msgs_bridge.bag.writer import jazzy_typestore
+from quad_msgs_bridge.conversions import MessageKit, path_msg, rosbags_kit, setpoints_msg
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.ros_helpers import declare, publication_log, publisher, run_node
 from quad_msgs_bridge.timebase import seconds
@@ -39,9 +40,15 @@ class TrajectoryNode(Node):
         # logged at the node clock's time under use_sim_time, else at sim time 0: it publishes before the flight
         sim_time = self.get_parameter('use_sim_time').value
         self.publication_log = publication_log(self, lambda: self.get_clock().now().nanoseconds if sim_time else 0)
+        # published as CDR bytes serialized by the rosbags Jazzy typestore, as the embedded flight's bag holds them
+        # (rclpy's serialize_message on Fast DDS leaves the alignment padding uninitialised: a log of its bytes
+        # would differ from flight to flight)
+        messages = rosbags_kit()
+        serialize = jazzy_typestore().serialize_cdr
         publisher(self, kit, SETPOINTS, log=self.publication_log).publish(
-            setpoints_msg(kit, path, child_frame_id=body))
-        publisher(self, kit, REFERENCE_PATH, log=self.publication_log).publish(path_msg(kit, path))
+            serialize(setpoints_msg(messages, path, child_frame_id=body), SETPOINTS.type).tobytes())
+        publisher(self, kit, REFERENCE_PATH, log=self.publication_log).publish(
+            serialize(path_msg(messages, path), REFERENCE_PATH.type).tobytes())
         self.get_logger().info(f'{scenario}: {len(path.times)} setpoints from t={path.start:.3f} s '
                                f'to {path.end:.3f} s published')
 

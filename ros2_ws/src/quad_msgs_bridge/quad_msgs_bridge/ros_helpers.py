@@ -1,6 +1,6 @@
 """rclpy side of the contract, shared by the three nodes: QoS profiles, validated parameters, main().
 
-The bridge's node-side modules (this one, bag.recorder_node, bag.publication_log) import rclpy; the cores never do.
+The bridge's node-side modules (this one, bag.recorder_node) import rclpy; the cores never do.
 """
 from __future__ import annotations
 

@@ -22,8 +22,6 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from rclpy.serialization import serialize_message
-
 from quad_msgs_bridge.bag.writer import BagWriter
 from quad_msgs_bridge.contract import TopicSpec
 
@@ -57,17 +55,19 @@ class PublicationLog:
 
 
 class RecordingPublisher:
-    """An rclpy publisher that logs each message it publishes: the CDR bytes as sent (a message object is
-    serialized once, here, and those bytes are published raw). Everything else is the publisher's."""
+    """An rclpy publisher that logs each message it publishes: the CDR bytes as sent. It takes serialized messages
+    only (the bridge's encoders, or a typestore's): rclpy's own serialize_message on Fast DDS leaves the alignment
+    padding uninitialised, so its bytes would differ between two identical flights. Everything else is the
+    publisher's."""
 
     def __init__(self, publisher, log: PublicationLog):
         self._publisher = publisher
         self._log = log
         self._name = publisher.topic_name
 
-    def publish(self, message) -> None:
+    def publish(self, message: bytes) -> None:
         if not isinstance(message, bytes):
-            message = serialize_message(message)
+            raise TypeError(f'{self._name}: a recording publisher publishes CDR bytes, not {type(message).__name__}')
         self._publisher.publish(message)
         self._log.writer.write_serialized(self._name, message, self._log.sim_time_ns(), time.time_ns())
 
