@@ -75,6 +75,31 @@ def spin_until(node, condition, timeout: float) -> bool:
     return False
 
 
+def wait_until(condition, timeout: float) -> bool:
+    """Whether ``condition()`` holds within ``timeout`` [s, wall] (it is asked every 10 ms)."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def odom_gate_once_matched(node, readers, namespace: str, timeout: float = 60.0):
+    """The gate of a lockstep flight that ``node`` must see whole: an odom subscription of ``node`` in ``namespace``,
+    made once each of ``readers`` (subscriptions of ``node``) reports its publishers matched on its own side. Start
+    the simulator with one more ``wait_for_subscribers`` than its real odom readers (and a ``start_delay`` for the
+    writers' side, which a reader cannot see): it steps only once the gate exists. A writer and a reader match each
+    on its own side, far apart across DDS vendors or on a loaded machine, and a reader drops what reaches it before
+    it has matched the writer (a Cyclone reader missed odometry 0 of a Fast DDS simulator)."""
+    from quad_msgs_bridge.contract import ODOM
+    from quad_msgs_bridge.conversions import rclpy_kit
+    from quad_msgs_bridge.ros_helpers import subscription
+    assert wait_until(lambda: all(reader.get_publisher_count() >= 1 for reader in readers), timeout), \
+        f'readers of {[reader.topic_name for reader in readers]} never matched their publishers'
+    return subscription(node, rclpy_kit(), ODOM, lambda _: None, raw=True, depth=1, namespace=namespace)
+
+
 @contextmanager
 def cpu_hogs(count: int | None = None):
     """A loaded machine while the block runs: ``count`` busy-loop processes (default one per CPU)."""

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ros_support import (HAVE_RCLPY, ROS_WHEELS_VENV, describe_ros, node_process, requires_ros, ros_series,
-                         ros_wheels_python)
+from ros_support import (HAVE_RCLPY, ROS_WHEELS_VENV, describe_ros, node_process, odom_gate_once_matched,
+                         requires_ros, ros_series, ros_wheels_python)
 
 WHEELS_PYTHON = ros_wheels_python()
 
@@ -101,9 +101,7 @@ def fly(node, namespace: str, on_wheels: set[str]) -> dict:
                      python=python('sim'))]
     gate = None
     try:
-        assert wait_until(lambda: all(s.get_publisher_count() >= 1 for s in subscriptions), timeout=60.0), \
-            ('this node\'s readers never matched their publishers', [p.lines for p in processes])
-        gate = subscription(node, kit, ODOM, lambda _: None, raw=True, depth=1, namespace=namespace)
+        gate = odom_gate_once_matched(node, subscriptions, namespace)
         # take what arrives while the flight runs; the simulator stays up after the last step, so that nothing
         # it sent is lost with its publishers
         take_until(subscriptions, lambda: (received['odom'] and received['odom'][-1][0] >= DURATION - 0.0015
@@ -115,16 +113,6 @@ def fly(node, namespace: str, on_wheels: set[str]) -> dict:
             node.destroy_subscription(taken)
     assert all(code == 0 for code in codes.values()), (codes, [p.lines for p in processes])
     return received
-
-
-def wait_until(condition, timeout: float) -> bool:
-    """Whether ``condition()`` holds within ``timeout`` [s, wall] (it is asked every 10 ms)."""
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.01)
-    return True
 
 
 def take_until(subscriptions, condition, timeout: float) -> bool:

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from ros_support import (HAVE_RCLPY, HAVE_TF2_MSGS, ROOT, SKIP_REASON, cpu_hogs, importable, node_process, requires_ros,
-                         spin_until)
+from ros_support import (HAVE_RCLPY, HAVE_TF2_MSGS, ROOT, SKIP_REASON, cpu_hogs, importable, node_process,
+                         odom_gate_once_matched, requires_ros, spin_until)
 
 pytestmark = [requires_ros, pytest.mark.ros]
 
@@ -476,10 +476,12 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
     odometry, wrench_stamps, diagnostics = {}, [], []
 
     def deep(topic, callback):   # a reader history for the whole flight: the lockstep does not wait for this node
-        subscription(ros_node, kit, topic, callback, depth=100_000, namespace=namespace)
-    deep(ODOM, lambda msg: odometry.__setitem__(round(odometry_from_msg(msg).stamp * 1e9), odometry_from_msg(msg)))
-    deep(CONTROL_WRENCH, lambda msg: wrench_stamps.append(msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec))
-    deep(CONTROL_DIAGNOSTICS, lambda msg: diagnostics.append(diagnostics_from_msg(msg)))
+        return subscription(ros_node, kit, topic, callback, depth=100_000, namespace=namespace)
+    readers = [
+        deep(ODOM, lambda msg: odometry.__setitem__(round(odometry_from_msg(msg).stamp * 1e9), odometry_from_msg(msg))),
+        deep(CONTROL_WRENCH,
+             lambda msg: wrench_stamps.append(msg.header.stamp.sec * 10 ** 9 + msg.header.stamp.nanosec)),
+        deep(CONTROL_DIAGNOSTICS, lambda msg: diagnostics.append(diagnostics_from_msg(msg)))]
     start = [0.0, 0.0, 0.5] + [0.0] * 9          # at rest 0.5 m below the hover point: S_z far from 0
     processes = [
         node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
@@ -488,10 +490,12 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
         node_process('controller', 'nnit2fsmc_controller.controller_node', namespace,
                      {'use_sim_time': True, 'common.measurement_filter_hz': 0.0,
                       'common.velocity_filter_hz': 0.0}),
+        # it waits for the controller's odom subscription, this node's and its gate (ros_support.odom_gate_once_matched)
         node_process('sim', 'quad_sim.sim_node', namespace,
-                     {'duration': 3.0, 'initial_state': start, 'wait_for_subscribers': 2}),
+                     {'duration': 3.0, 'initial_state': start, 'wait_for_subscribers': 3, 'start_delay': 0.5}),
     ]
     try:
+        odom_gate_once_matched(ros_node, readers, namespace)
         assert spin_until(ros_node, lambda: odometry and max(odometry) >= 1.0e9, timeout=120.0), 'no flight'
         negative = set_parameter(ros_node, namespace, 'common.lambda.z', -1.0)
         zero = set_parameter(ros_node, namespace, 'common.lambda.z', 0.0)
@@ -499,7 +503,8 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
         set_at = max(odometry)
         accepted = set_parameter(ros_node, namespace, 'common.lambda.z', 8.0)
         assert spin_until(ros_node, lambda: max(odometry) >= 2.999e9, timeout=120.0), 'the flight never ended'
-        spin_until(ros_node, lambda: False, timeout=1.0)        # the last answers
+        # the last answers (this node's spin may be behind: the lockstep does not wait for it)
+        spin_until(ros_node, lambda: min(len(wrench_stamps), len(diagnostics)) >= len(odometry) - 1, timeout=10.0)
     finally:
         codes = stop_all(processes)
     assert all(code == 0 for code in codes.values()), codes
