@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 
 import flight_stack  # noqa: E402,F401  (puts the package folders on the path)
 from flight_stack.embedded import fly_embedded  # noqa: E402
-from flight_stack.live_view import SUBPROTOCOL, LiveServer, LiveView  # noqa: E402
+from flight_stack.live_view import SUBPROTOCOL, serve_live_view  # noqa: E402
 from nnit2fsmc_controller.factory import load_gains  # noqa: E402
 from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
 from quad_msgs_bridge.bag.flight_bag import FlightBag  # noqa: E402
@@ -83,12 +83,13 @@ def flight_times(duration: float, repeats: int) -> dict[str, list[float]]:
         for k in range(repeats):
             plain, alone, watched = times.values()
             plain.append(fly(Path(tmp) / f'plain{k}'))
-            with LiveServer('127.0.0.1', 0) as server:
-                alone.append(fly(Path(tmp) / f'alone{k}', [LiveView(server, params)]))
-            with LiveServer('127.0.0.1', 0) as server:
-                view = LiveView(server, params)
-                reader = subprocess.Popen([sys.executable, __file__, '--client', server.url], stdout=subprocess.PIPE,
-                                          text=True)
+            view = serve_live_view('127.0.0.1', 0, params)
+            with view.server:
+                alone.append(fly(Path(tmp) / f'alone{k}', [view]))
+            view = serve_live_view('127.0.0.1', 0, params)
+            with view.server:
+                reader = subprocess.Popen([sys.executable, __file__, '--client', view.server.url],
+                                          stdout=subprocess.PIPE, text=True)
                 assert reader.stdout.readline().strip() == 'subscribed'
                 time.sleep(0.5)                   # the server has taken every subscription
                 watched.append(fly(Path(tmp) / f'watched{k}', [view]))
@@ -104,8 +105,8 @@ def per_step_costs(number: int = 20000) -> tuple[float, float]:
     sample = OdometrySample(12.345, (1.0, -2.0, 3.0), (0.1, 0.2, 0.3, 0.927), (0.4, 0.5, 0.6), (0.7, 0.8, 0.9))
     step = (sample, (1.1, 1.2, 1.3, 1.4), (5.0, 0.1, -0.2, 0.01), (1.0, 2.0, 3.0), 0.1, [0.1] * 6, [0.2] * 6,
             [0.3] * 6, [3.0] * 6)
-    with LiveServer('127.0.0.1', 0) as server:
-        view = LiveView(server, params)
+    view = serve_live_view('127.0.0.1', 0, params)
+    with view.server:
         alone = timeit.timeit(lambda: view.record_step(*step), number=number)
         messages = timeit.timeit(lambda: view._contract.record_step(*step), number=number)
     return 1e6 * alone / number, 1e6 * messages / number

@@ -149,31 +149,31 @@ def check_live_options(args, backend: str) -> float:
     return check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor, 0.0, 1000.0)
 
 
-def start_live_server(host: str, port: int):
-    """The live view's server, or an exit code after saying why it cannot be served."""
+def start_live_view(host: str, port: int, params, topics):
+    """The live view of the flight (its ``server`` listening), or an exit code after saying why it cannot be served."""
     try:
-        from flight_stack.live_view import LiveServer, LiveViewError, is_loopback
+        from flight_stack.live_view import LiveViewError, is_loopback, serve_live_view
     except ImportError as error:   # foxglove-sdk is in requirements.txt, not in the ROS path's requirements
         print(f'error: --live needs the foxglove-sdk package ({error}): pip install -r requirements.txt',
               file=sys.stderr)
         return 2
     try:
-        server = LiveServer(host, port)
+        view = serve_live_view(host, port, params, topics)
     except LiveViewError as error:
         print(f'error: {error} (--live-host, --live-port)', file=sys.stderr)
         return 2
+    server = view.server
     print(f'live view: {server.url} (Foxglove: Open connection -> Foxglove WebSocket -> {server.url})', flush=True)
     if not is_loopback(host):
         print(f'warning: the live view listens on {host}: anyone who can reach this address can watch the flight '
               f'(there is no authentication)', flush=True)
-    return server
+    return view
 
 
-def live_sinks(server, params, topics, speed_factor: float) -> list:
+def live_sinks(view, speed_factor: float) -> list:
     """The step sinks of a live flight: a pacer (unless as fast as possible), then the live view."""
-    from flight_stack.live_view import LiveView
     from flight_stack.pacing import Pacer
-    return ([Pacer(speed_factor)] if speed_factor > 0.0 else []) + [LiveView(server, params, topics=topics)]
+    return ([Pacer(speed_factor)] if speed_factor > 0.0 else []) + [view]
 
 
 @contextlib.contextmanager
@@ -212,18 +212,18 @@ class Flown:
     failure_time_s: float | None = None   #: [s] sim time at which it failed
 
 
-def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_server=None,
+def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_view=None,
              speed_factor: float = 0.0, live_wait: bool = False) -> Flown:
     """The embedded backend; with ``bag``, the flight to review is the one in memory (what the bag holds)."""
     from flight_stack.closed_loop import FailureRules
     from flight_stack.embedded import fly_embedded
     from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
 
-    with stop_signals(), live_server or contextlib.nullcontext():
-        sinks = live_sinks(live_server, plan.params, plan.topics, speed_factor) if live_server else []
-        if live_server and live_wait:
+    with stop_signals(), live_view.server if live_view else contextlib.nullcontext():
+        sinks = live_sinks(live_view, speed_factor) if live_view else []
+        if live_view and live_wait:
             print('live view: waiting for a client to subscribe (Ctrl-C to stop)', flush=True)
-            live_server.wait_for_subscriber(lambda: False)   # a stop signal raises KeyboardInterrupt meanwhile
+            live_view.server.wait_for_subscriber(lambda: False)   # a stop signal raises KeyboardInterrupt meanwhile
         with deferred():
             recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
                                           controller=plan.controller, scenario=plan.scenario, backend='embedded',
@@ -402,9 +402,9 @@ def run(argv: list[str]) -> int:
     except ParameterError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
-    live_server = start_live_server(args.live_host, args.live_port) if args.live else None
-    if isinstance(live_server, int):
-        return live_server
+    live_view = start_live_view(args.live_host, args.live_port, plan.params, plan.topics) if args.live else None
+    if isinstance(live_view, int):
+        return live_view
     try:
         output.create()
     except ParameterError as error:
@@ -414,7 +414,7 @@ def run(argv: list[str]) -> int:
           f'(disturbances {"on" if plan.disturbances.enabled else "off"}), {backend} backend'
           + (f', {args.vehicles} vehicles' if args.vehicles > 1 else ''))
     try:
-        return fly_and_report(args, plan, backend, output, bag_shown, live_server, speed_factor)
+        return fly_and_report(args, plan, backend, output, bag_shown, live_view, speed_factor)
     except BaseException:
         output.keep_partial()
         raise
@@ -472,7 +472,7 @@ def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = Fa
     return flown.data
 
 
-def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, live_server=None,
+def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, live_view=None,
                    speed_factor: float = 0.0) -> int:
     """Fly, write summary and review into the staged output, then move it into place."""
     from flight_stack.summary import format_summary, write_summary
@@ -485,7 +485,7 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
         elif args.vehicles > 1:
             flights = fly_fleet_here(args, plan, output.bag, bag_shown)
         else:
-            flights = [(None, fly_here(plan, output.bag, bag_shown, not args.quiet, live_server, speed_factor,
+            flights = [(None, fly_here(plan, output.bag, bag_shown, not args.quiet, live_view, speed_factor,
                                        args.live_wait))]
     except KeyboardInterrupt:
         return unfinished(output, 'interrupted' + (f'; bag closed: {output.bag}' if output.bag else ''), 130)

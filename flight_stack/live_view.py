@@ -87,22 +87,34 @@ class LiveServer:
 
     One server serves every vehicle of a flight: channels are made once per topic (so ``/clock``
     is shared). A context manager that stops the server.
+
+    Every channel is made before the server listens (:meth:`listen`; a channel made later raises). The
+    channels that exist when a client connects are advertised to it before its first request is read. A
+    channel made while a client is connected is not: foxglove-sdk sends the advertisement first and
+    only then notes the channel as advertised to that client. A client that subscribed at once was
+    refused ("unknown channel"), so nothing came; ``--live-wait`` then waited forever (a test client
+    on a loaded machine, 1 run in 11; the Foxglove app reconnecting to a restarted run would race too).
     """
 
     def __init__(self, host: str, port: int, name: str = 'NNIT2FSMC flight'):
+        """Not listening yet: make the channels, then :meth:`listen`."""
         self._context = foxglove.Context()
         self._subscriptions = _Subscriptions()
-        try:
-            self._server = foxglove.start_server(name=name, host=host, port=port, context=self._context,
-                                                 server_listener=self._subscriptions,
-                                                 capabilities=[foxglove.Capability.Time])
-        except RuntimeError as error:
-            raise LiveViewError(f'cannot serve the live view on {host}:{port}: {error}') from error
-        self.host = host
-        self.port = self._server.port
+        self._server = None
+        self.host, self.port, self.name = host, port, name
         self.typestore = jazzy_typestore()
         self._channels: dict[str, object] = {}
         self._latched: dict[int, tuple[object, object, int]] = {}   # channel id -> (channel, message, log time)
+
+    def listen(self) -> None:
+        """Start serving (with port 0, ``port`` is then the one taken); LiveViewError if it cannot."""
+        try:
+            self._server = foxglove.start_server(name=self.name, host=self.host, port=self.port,
+                                                 context=self._context, server_listener=self._subscriptions,
+                                                 capabilities=[foxglove.Capability.Time])
+        except RuntimeError as error:
+            raise LiveViewError(f'cannot serve the live view on {self.host}:{self.port}: {error}') from error
+        self.port = self._server.port
 
     @property
     def url(self) -> str:
@@ -110,9 +122,14 @@ class LiveServer:
         return f'ws://{host}:{self.port}'
 
     # --- channels -------------------------------------------------------------------------------
+    def _check_not_listening(self, topic: str) -> None:
+        if self._server is not None:
+            raise RuntimeError(f'live view channel {topic} made after the server started listening (see LiveServer)')
+
     def ros_channel(self, topic: str, type_name: str) -> foxglove.Channel:
         """The channel of contract topic ``topic`` (absolute name): CDR messages of ROS 2 type ``type_name``."""
         if topic not in self._channels:
+            self._check_not_listening(topic)
             msgdef, _ = self.typestore.generate_msgdef(type_name, ros_version=2)
             schema = foxglove.Schema(name=type_name, encoding='ros2msg', data=msgdef.encode())
             self._channels[topic] = foxglove.Channel(topic, schema=schema, message_encoding='cdr',
@@ -122,6 +139,7 @@ class LiveServer:
     def scene_channel(self, topic: str) -> SceneUpdateChannel:
         """The ``foxglove.SceneUpdate`` channel ``topic``."""
         if topic not in self._channels:
+            self._check_not_listening(topic)
             self._channels[topic] = SceneUpdateChannel(topic, context=self._context)
         return self._channels[topic]
 
@@ -158,7 +176,8 @@ class LiveServer:
         return True
 
     def close(self) -> None:
-        self._server.stop()
+        if self._server is not None:
+            self._server.stop()
 
     def __enter__(self) -> 'LiveServer':
         return self
@@ -341,3 +360,13 @@ class LiveView:
         """Show the last step (the server stays up for the other vehicles; its owner stops it)."""
         if self._last is not None:
             self._show()
+
+
+def serve_live_view(host: str, port: int, params: VehicleParams, topics: Sequence[TopicSpec] = RECORDED_TOPICS,
+                    namespace: str = DEFAULT_NAMESPACE) -> LiveView:
+    """The live view of one vehicle on a new :class:`LiveServer` listening on ``host``:``port``, its channels
+    made before it listens; LiveViewError if it cannot listen. Its ``server`` is the context manager."""
+    server = LiveServer(host, port)
+    view = LiveView(server, params, namespace, topics)
+    server.listen()
+    return view

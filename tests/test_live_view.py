@@ -19,7 +19,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 import run_stack
-from flight_stack.live_view import VehicleScene, is_loopback, PATH_MAX_POINTS
+from flight_stack.live_view import VehicleScene, is_loopback, serve_live_view, PATH_MAX_POINTS
 from flight_stack.pacing import MAX_LAG, Pacer
 from quad_msgs_bridge.bag.metadata import read_metadata
 from quad_msgs_bridge.bag.reader import is_finalized, mcap_file
@@ -202,6 +202,25 @@ def test_ctrl_c_closes_the_server_and_the_bag(tmp_path):
     assert counts == {topic: sum(m[0] == topic for m in recorded) for topic in CONTRACT}
     per_step = [n for topic, n in counts.items() if not topic.endswith(('setpoints', 'reference_path'))]
     assert 0 < min(per_step) == max(per_step) < STEPS                     # stopped between two steps, mid-flight
+
+
+def test_every_channel_is_advertised_when_a_client_connects_and_none_can_be_made_later():
+    """A client that connects at once gets every channel of the flight in its first messages (they exist before
+    the server listens), and a subscription to them is taken; a channel made after the server listens is refused
+    (foxglove-sdk could refuse a client's subscription to it: LiveServer)."""
+    params, _ = load_vehicle_file()
+    view = serve_live_view('127.0.0.1', 0, params)
+    with view.server as server, connect(server.url, subprotocols=['foxglove.sdk.v1'], open_timeout=TIMEOUT) as client:
+        advertised = {}
+        while len(advertised) < len(server._channels):
+            message = json.loads(client.recv(timeout=TIMEOUT))
+            assert message['op'] in ('serverInfo', 'advertise', 'advertiseServices'), message
+            advertised.update({c['topic']: c['id'] for c in message.get('channels', [])})
+        assert set(advertised) == set(server._channels) and '/quad/odom' in advertised
+        client.send(json.dumps({'op': 'subscribe', 'subscriptions': [{'id': 1, 'channelId': advertised['/quad/odom']}]}))
+        assert server.wait_for_subscriber(lambda: True, poll=TIMEOUT)     # taken within TIMEOUT
+        with pytest.raises(RuntimeError, match='/later'):
+            server.ros_channel('/later', 'nav_msgs/msg/Odometry')
 
 
 def test_a_port_in_use_is_a_clean_error_before_flying(tmp_path, capsys):
