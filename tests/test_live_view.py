@@ -217,7 +217,8 @@ def test_every_channel_is_advertised_when_a_client_connects_and_none_can_be_made
             assert message['op'] in ('serverInfo', 'advertise', 'advertiseServices'), message
             advertised.update({c['topic']: c['id'] for c in message.get('channels', [])})
         assert set(advertised) == set(server._channels) and '/quad/odom' in advertised
-        client.send(json.dumps({'op': 'subscribe', 'subscriptions': [{'id': 1, 'channelId': advertised['/quad/odom']}]}))
+        subscription = {'id': 1, 'channelId': advertised['/quad/odom']}
+        client.send(json.dumps({'op': 'subscribe', 'subscriptions': [subscription]}))
         assert server.wait_for_subscriber(lambda: True, poll=TIMEOUT)     # taken within TIMEOUT
         with pytest.raises(RuntimeError, match='/later'):
             server.ros_channel('/later', 'nav_msgs/msg/Odometry')
