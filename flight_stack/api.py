@@ -63,7 +63,8 @@ def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: flo
         max_error: float = 1.0, out: str | Path | None = None, overwrite: bool = False,
         true_vehicle: VehicleParams | str | Path | None = None, wind: Mapping | None = None,
         sensor_noise: Mapping | None = None, delay_s: float = 0.0, motor_time_constant_s: float = 0.0,
-        mass_change: Mapping | None = None, rotor_efficiency_loss: Mapping | None = None) -> Flight:
+        mass_change: Mapping | None = None, rotor_efficiency_loss: Mapping | None = None,
+        plant: str = 'quad_sim') -> Flight:
     """Fly a whole scenario on the embedded backend (no ROS) and return the :class:`Flight`: its time
     series as numpy arrays with units (``time``, ``state``, ``reference_position``, ``forces``,
     ``controls``, ``surfaces``, ``equivalent``, ``corrective``; ``to_pandas()``), ``metrics()``, and
@@ -83,6 +84,9 @@ def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: flo
     * ``rotor_efficiency_loss``: ``{at_s: 10.0, loss: [0.2, 0, 0, 0]}``, lost thrust fractions of F1..F4
       from at_s on.
 
+    ``plant`` is what the simulator flies: ``quad_sim`` (our model of eq. 1) or ``rotorpy`` (RotorPy's
+    ``Multirotor`` with its aerodynamics and motor model, docs/ROTORPY.md).
+
     With ``out`` the run is written as ``run_stack.py --out`` writes it (summary, bag, review), and
     ``read_flight(out / 'bag')`` gives the same flight back; without it nothing is written. Raises
     ParameterError (a ValueError) naming the argument before flying on any invalid setting.
@@ -92,7 +96,7 @@ def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: flo
                       vehicle=vehicle, gains=gains, physics_rate=physics_rate, settle_time=settle_time,
                       max_error=max_error, out=out, overwrite=overwrite, true_vehicle=true_vehicle, wind=wind,
                       sensor_noise=sensor_noise, delay_s=delay_s, motor_time_constant_s=motor_time_constant_s,
-                      mass_change=mass_change, rotor_efficiency_loss=rotor_efficiency_loss)
+                      mass_change=mass_change, rotor_efficiency_loss=rotor_efficiency_loss, plant=plant)
 
 
 def run_campaign(spec: str | Path, out: str | Path, *, flights: int | None = None, seed: int | None = None,

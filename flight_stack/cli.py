@@ -53,6 +53,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     from nnit2fsmc_controller.trajectory import SCENARIOS
     from quad_msgs_bridge.contract import RECORDED_TOPICS
     from flight_stack.fleet import MAX_VEHICLES
+    from quad_sim.plants import DEFAULT_PLANT, PLANTS
 
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -71,6 +72,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                              'and an existing --bag')
     parser.add_argument('--vehicle', type=Path, default=None, help='vehicle YAML (default: the packaged one)')
     parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
+    parser.add_argument('--plant', choices=PLANTS, default=DEFAULT_PLANT,
+                        help='what the simulator flies: our model of eq. (1), or RotorPy (docs/ROTORPY.md)')
     parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz], a multiple of the control rate')
     parser.add_argument('--settle-time', type=float, default=None,
                         help='metrics ignore the first S seconds (default: 5, or half of a flight shorter than 10 s)')
@@ -233,7 +236,7 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
                                   plan.duration, plan.physics_rate, progress=progress, bag=written,
                                   sinks=sinks, perturbations=plan.perturbations,
-                                  rules=FailureRules(plan.settle_time, max_error=math.inf))
+                                  rules=FailureRules(plan.settle_time, max_error=math.inf), plant=plan.plant)
             for sink in sinks:
                 sink.close()
     flight = result.flight
@@ -264,7 +267,7 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
         with closed_whole(recording) as written:
             results = fly_fleet(plan.controller, trajectories, plan.params, plan.disturbances, plan.gains,
                                 plan.duration, plan.physics_rate, progress=not args.quiet, bag=written,
-                                rules=FailureRules(plan.settle_time, max_error=math.inf))
+                                rules=FailureRules(plan.settle_time, max_error=math.inf), plant=plan.plant)
     flights = []
     for vehicle, result in zip(vehicles, results):
         flight = result.flight
@@ -293,7 +296,7 @@ def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str,
         control_rate=plan.control_rate, bag=bag,
         topics=[t.name for t in plan.topics], mode=args.mode, speed_factor=args.speed_factor,
         extra_odom_subscribers=args.extra_subscribers, vehicle_file=args.vehicle, gains_file=args.gains,
-        settle_time=plan.settle_time, quiet=args.quiet, record_by=args.record_by))
+        settle_time=plan.settle_time, quiet=args.quiet, record_by=args.record_by, plant=plan.plant))
     if result.failed_node:
         raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
                             + (f'; the bag is closed: {bag}' if bag_shown else ''),
@@ -386,7 +389,7 @@ def run(argv: list[str]) -> int:
         plan = plan_flight(args.controller, args.scenario, duration=args.duration, disturbances=args.disturbances,
                            seed=args.seed, vehicle_file=args.vehicle, gains_file=args.gains,
                            physics_rate=args.physics_rate, settle_time=args.settle_time, max_error=args.max_error,
-                           topics=args.topics)
+                           topics=args.topics, plant=args.plant)
         check_number('--extra-subscribers', args.extra_subscribers, 0.0, 100.0)
         check_number('--vehicles', args.vehicles, 1, MAX_VEHICLES)
         backend = choose_backend(args.backend, args.live)

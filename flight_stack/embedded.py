@@ -25,7 +25,7 @@ from quad_msgs_bridge.reference import ReferenceSample, SetpointPath
 from quad_msgs_bridge.runtime import freeze_long_lived_objects
 from quad_msgs_bridge.state import OdometrySample, odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
-from quad_sim.model import QuadrotorModel
+from quad_sim.plants import DEFAULT_PLANT, make_plant
 from quad_sim.perturbations.actuation import MotorLag, TransportDelay
 from quad_sim.perturbations.sensor_noise import SensorNoise
 from quad_sim.perturbations.vehicle_change import VehicleChange
@@ -157,7 +157,8 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
                  progress: bool = False, bag: FlightBag | None = None,
                  stop: Callable[[], bool] | None = None, sinks: Sequence = (),
                  perturbations: Perturbations | None = None,
-                 rules: FailureRules = FailureRules(settle_time=5.0, max_error=math.inf)) -> FlightResult:
+                 rules: FailureRules = FailureRules(settle_time=5.0, max_error=math.inf),
+                 plant: str = DEFAULT_PLANT) -> FlightResult:
     """Fly ``trajectory`` for ``duration`` [s] of sim time; one record row per control step.
 
     ``params`` is the controller's nominal model, and the vehicle flown unless ``perturbations``
@@ -167,7 +168,8 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     ``record_setpoints(path)`` once, then ``record_step(...)`` per step (e.g. a ``pacing.Pacer``,
     then a ``live_view.LiveView``). ``stop`` is asked between two control steps: once it returns
     true the flight raises KeyboardInterrupt, with every step so far complete in the bag. A flight
-    that breaks one of ``rules`` ends there (``FlightResult.failure`` says why).
+    that breaks one of ``rules`` ends there (``FlightResult.failure`` says why). ``plant`` is what the
+    simulator flies (:data:`quad_sim.plants.PLANTS`: our model, or RotorPy's).
     """
     perturbations = perturbations or Perturbations()
     controller = build_controller(controller_kind, params, gains)
@@ -180,7 +182,7 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
 
     setpoints = SetpointStream(trajectory, trajectory.duration, setpoint_rate, on_window=publish)
     substeps = physics_substeps(controller.dt, physics_rate)
-    model = QuadrotorModel(perturbations.true_vehicle or params, disturbances)
+    model = make_plant(plant, perturbations.true_vehicle or params, disturbances)
     simulator = Simulator(model, 1.0 / physics_rate, trajectory.initial_state,
                           motor_lag=perturbations.motor_lag, wind=perturbations.wind, changes=perturbations.changes)
     loop = ClosedLoop(controller, simulator, setpoints.sample, substeps, rules,
@@ -246,14 +248,16 @@ def _vehicle(values, k: int):
 def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParams, disturbances: Disturbances,
               gains: dict, duration: float, physics_rate: float, setpoint_rate: float = 50.0,
               progress: bool = False, bag=None, stop: Callable[[], bool] | None = None,
-              rules: FailureRules = FailureRules(settle_time=5.0, max_error=math.inf)) -> list[FlightResult]:
+              rules: FailureRules = FailureRules(settle_time=5.0, max_error=math.inf),
+              plant: str = DEFAULT_PLANT) -> list[FlightResult]:
     """Fly a fleet on one sim clock: vehicle k flies ``trajectories[k]`` (its own, e.g. offset, copy of
     the scenario), all stepped together as one batch; one FlightResult per vehicle.
 
     Each vehicle's controller reads its state through an odometry message of it and answers it with
     the reference sampled from its own setpoint path, as its controller node does in a ROS fleet.
     With ``bag`` (a FleetBag) every vehicle's topics are recorded in its namespace, ``/clock`` and
-    ``/tf`` once per step. A vehicle that breaks one of ``rules`` is frozen; the others fly on.
+    ``/tf`` once per step. A vehicle that breaks one of ``rules`` is frozen; the others fly on. ``plant``:
+    as for :func:`fly_embedded` (RotorPy steps the vehicles one after the other).
     """
     count = len(trajectories)
     controller = build_controller(controller_kind, params, gains, batch=count)
@@ -268,7 +272,7 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
              for v, trajectory in enumerate(trajectories)]
     substeps = physics_substeps(controller.dt, physics_rate)
     start = [np.array(values) for values in zip(*(trajectory.initial_state for trajectory in trajectories))]
-    simulator = Simulator(QuadrotorModel(params, disturbances), 1.0 / physics_rate, start)
+    simulator = Simulator(make_plant(plant, params, disturbances), 1.0 / physics_rate, start)
     loop = ClosedLoop(controller, simulator, lambda t: _stacked([path.sample(t) for path in paths]), substeps,
                       rules, observe=through_odometry, measurement=build_measurement_stage(gains))
     slopes = controller.surface_slopes()

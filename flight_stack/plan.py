@@ -18,6 +18,7 @@ from quad_msgs_bridge.contract import TopicSpec
 from quad_msgs_bridge.review.metrics import default_settle_time
 from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams, check_number, load_vehicle_file
 from quad_sim.perturbations.vehicle_change import VehicleChange, vehicle_change
+from quad_sim.plants import DEFAULT_PLANT, check_plant
 
 from .embedded import Perturbations
 
@@ -42,6 +43,7 @@ class FlightPlan:
     max_error: float            #: [m] largest position error after settling of a flight that passes
     topics: tuple[TopicSpec, ...]
     perturbations: Perturbations | None = None   #: the flown world, when it differs from the nominal one
+    plant: str = DEFAULT_PLANT   #: what the simulator flies (quad_sim.plants.PLANTS)
 
 
 #: the keys of fly()'s mid-flight vehicle changes -> (VehicleParams field, how to check the value)
@@ -150,14 +152,17 @@ def check_settle_time(settle_time: float | None, duration: float, control_rate: 
 def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
                 disturbances: bool | None = None, seed: int = 0, vehicle_file: Path | VehicleParams | None = None,
                 gains_file: Path | None = None, physics_rate: float = 1000.0, settle_time: float | None = None,
-                max_error: float = 1.0, topics: Sequence[str] | None = None, **world) -> FlightPlan:
+                max_error: float = 1.0, topics: Sequence[str] | None = None, plant: str = DEFAULT_PLANT,
+                **world) -> FlightPlan:
     """Every setting of a flight, checked; raises ParameterError (see the module doc).
 
     ``duration`` None: the scenario's length; ``disturbances`` None: as in the vehicle file (for a
     VehicleParams ``vehicle_file``: as in the packaged one); ``settle_time`` None:
     :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the duration; ``topics`` None: every
-    recorded contract topic; ``world``: the keyword arguments of :func:`plan_perturbations`.
+    recorded contract topic; ``plant``: what the simulator flies (``--plant``: quad_sim or rotorpy); ``world``:
+    the keyword arguments of :func:`plan_perturbations`.
     """
+    check_plant(plant, '--plant')
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise ParameterError(f'--seed: {seed!r} is outside the valid range [0, {MAX_SEED}] (an integer)')
     if duration is not None:
@@ -195,5 +200,5 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
         disturbances=vehicle_disturbances, gains=gains, seed=seed, duration=duration,
         physics_rate=physics_rate, control_rate=control_rate,
         settle_time=check_settle_time(settle_time, duration, control_rate), max_error=max_error,
-        topics=select_topics(topics), perturbations=perturbations)
+        topics=select_topics(topics), perturbations=perturbations, plant=plant)
 

@@ -68,6 +68,7 @@ class RosFlightConfig:
     #: see quad_msgs_bridge.bag.publication_log) or 'recorder' (the record node, one more reader of every topic)
     record_by: str = 'publishers'
     publish_tf: bool = True   #: the simulator broadcasts every vehicle's odom -> <ns>/base_link on /tf
+    plant: str = 'quad_sim'   #: what the simulator node flies (its parameter plant; quad_sim.plants.PLANTS)
 
 
 @dataclass
@@ -131,7 +132,7 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
         ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node', home,
          {'duration': config.duration, 'exit_at_end': True, 'disturbances': config.disturbances,
           'physics_rate': config.physics_rate, 'odometry_rate': config.control_rate, 'mode': config.mode,
-          'speed_factor': config.speed_factor,
+          'speed_factor': config.speed_factor, 'plant': config.plant,
           'wait_for_subscribers': (2 if recorder else 1) + config.extra_odom_subscribers,
           # an outside recorder subscribes to odom among its other topics: give those time to match too
           'start_delay': EXTRA_SUBSCRIBER_DELAY if config.extra_odom_subscribers else 0.0,

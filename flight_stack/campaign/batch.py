@@ -16,7 +16,7 @@ from nnit2fsmc_controller.factory import build_controller, build_measurement_sta
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.review.metrics import chattering_force, chattering_moment, tracking_metrics
 from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
-from quad_sim.model import QuadrotorModel
+from quad_sim.plants import make_plant
 from quad_sim.simulator import Simulator
 
 from ..closed_loop import FAILURES, ClosedLoop, FailureRules
@@ -109,7 +109,7 @@ def _fly(job: BatchJob, steps: int | None) -> list[dict]:
     conditions = [sample_conditions(spec, setup.nominal, k) for k in job.flights]
     perturbations = build_perturbations(spec, conditions, setup.control_dt, setup.physics_dt, batch=True)
     controller = build_controller(job.controller, setup.nominal, setup.gains, batch=size)
-    model = QuadrotorModel(perturbations.true_vehicle, setup.disturbances)
+    model = make_plant(spec.plant, perturbations.true_vehicle, setup.disturbances)
     start = [np.full(size, value) for value in setup.trajectory.initial_state]
     simulator = Simulator(model, setup.physics_dt, start, motor_lag=perturbations.motor_lag, wind=perturbations.wind)
     setpoints = setpoint_path(published_path(setup.trajectory, 50.0))

@@ -27,6 +27,7 @@ left out means no such perturbation; other tools write these files, so the names
     physics_rate_hz: 1000      # a whole multiple of control_rate_hz (default: equal to it)
     measurement_filters: true  # every controller reads through the gains file's measurement stage
                                # (common.measurement_filter_hz, common.velocity_filter_hz); false: none
+    plant: quad_sim            # what the simulator flies: quad_sim (our model) or rotorpy (docs/ROTORPY.md)
 
 ``inertia`` draws Ix, Iy and Iz on their own. A distribution is a number (relative uniform half
 width), ``{dist: uniform, half_width: x}`` or ``{dist: normal, std: s}``; relative draws must keep a
@@ -35,6 +36,9 @@ direction the wind blows towards, from +x (east) counter-clockwise; default: dra
 flight). ``sensor_noise`` entries are white-noise standard deviations, or ``{std: s, bias_std: b}``
 with a constant bias drawn per flight from N(0, b^2). An unknown key, a negative standard deviation,
 an empty controller list or ``flights: 0`` is refused before anything flies, naming the key.
+On ``plant: rotorpy`` a batch's vehicles are stepped one after the other by RotorPy (about 2 ms of wall
+time per vehicle and physics step), and ``vehicle.thrust_coefficient`` / ``drag_coefficient`` are
+refused (RotorPy shares one torque-to-thrust ratio between its rotors).
 """
 from __future__ import annotations
 
@@ -46,6 +50,7 @@ from typing import Any, Mapping
 import yaml
 
 from nnit2fsmc_controller.factory import CONTROLLERS
+from quad_sim.plants import DEFAULT_PLANT, check_plant
 from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
@@ -64,7 +69,7 @@ NOISE_KEYS = ('position_m', 'velocity_mps', 'attitude_rad', 'body_rate_radps')
 _STANDARD_NORMAL = NormalDist()
 TOP_KEYS = ('scenario', 'duration', 'settle_time', 'controllers', 'flights', 'seed', 'max_error_m',
             'disturbances', 'vehicle', 'wind', 'sensor_noise', 'delay_s', 'motor_time_constant_s',
-            'control_rate_hz', 'physics_rate_hz', 'measurement_filters')
+            'control_rate_hz', 'physics_rate_hz', 'measurement_filters', 'plant')
 
 
 @dataclass(frozen=True)
@@ -122,6 +127,7 @@ class CampaignSpec:
     control_rate_hz: float | None = None
     physics_rate_hz: float | None = None
     measurement_filters: bool = True     #: False: every controller reads the measurement unfiltered
+    plant: str = DEFAULT_PLANT           #: what the simulator flies (quad_sim.plants.PLANTS)
     source: str = ''                     #: the YAML text it was read from (kept with the results)
 
     @property
@@ -164,6 +170,8 @@ class CampaignSpec:
         for key in ('delay_s', 'motor_time_constant_s', 'control_rate_hz', 'physics_rate_hz'):
             if getattr(self, key):
                 document[key] = getattr(self, key)
+        if self.plant != DEFAULT_PLANT:
+            document['plant'] = self.plant
         return document
 
 
@@ -281,7 +289,12 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
         physics_rate_hz=(None if 'physics_rate_hz' not in top
                          else check_number('physics_rate_hz', top['physics_rate_hz'], 0.0, 1e6, low_inclusive=False)),
         measurement_filters=measurement_filters,
+        plant=check_plant(top.get('plant', DEFAULT_PLANT), 'plant'),
         source=source)
+    unrepresentable = [key for key in ('thrust_coefficient', 'drag_coefficient') if key in spec.vehicle]
+    if spec.plant == 'rotorpy' and unrepresentable:
+        raise ParameterError(f'vehicle.{unrepresentable[0]}: not with plant rotorpy (RotorPy has one thrust and one '
+                             'torque coefficient for every rotor); leave it out or fly plant quad_sim')
     if 'rotor_efficiency_loss' in spec.vehicle and spec.vehicle['rotor_efficiency_loss'].bound >= 1.0:
         raise ParameterError('vehicle.rotor_efficiency_loss: a rotor cannot lose all of its thrust; keep it below 1')
     _check_settling(spec, 'duration')

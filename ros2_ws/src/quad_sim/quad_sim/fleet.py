@@ -29,11 +29,12 @@ class Fleet:
     """Vehicles of one model stepped together, each from its own initial state."""
 
     def __init__(self, model: QuadrotorModel, physics_dt: float, initial_states: Sequence[Sequence[float]]):
-        """ValueError naming the vehicle (1-based) of an invalid initial state."""
+        """ValueError naming the vehicle (1-based) of an invalid initial state. Each vehicle flies its own copy of
+        ``model`` (a plant of :mod:`quad_sim.plants`; RotorPy's holds each vehicle's rotor speeds)."""
         self.simulators = []
         for number, state in enumerate(initial_states, start=1):
             try:
-                self.simulators.append(Simulator(model, physics_dt, state))
+                self.simulators.append(Simulator(model.with_vehicle(model.params), physics_dt, state))
             except ParameterError:
                 raise
             except ValueError as error:

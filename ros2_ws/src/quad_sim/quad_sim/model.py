@@ -201,6 +201,10 @@ class QuadrotorModel:
         self._constants = vehicle_constants(params)
         self._table = disturbance_table(disturbances)
 
+    def with_vehicle(self, params: VehicleParams) -> 'QuadrotorModel':
+        """The same model flying ``params`` from now on (a payload, a rotor loss: the simulator's vehicle changes)."""
+        return QuadrotorModel(params, self.disturbances)
+
     def controls(self, forces: Sequence) -> tuple:
         """Virtual controls (U1 [N], U2 [N], U3 [N], U4 [N m]) the true rotors of one vehicle give for
         commanded thrusts F1..F4 [N] (clipped to the rotor range first)."""

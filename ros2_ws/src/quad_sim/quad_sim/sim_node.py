@@ -41,7 +41,7 @@ from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .fleet import Fleet, LockstepAnswers, split_initial_states
-from .model import QuadrotorModel
+from .plants import DEFAULT_PLANT, PLANTS, make_plant
 from .simulator import compile_kernels
 
 MODES = ('lockstep', 'realtime')
@@ -92,7 +92,10 @@ class SimNode(Node):
                                  f'odometry_rate {odometry_rate} Hz')
         self.substeps = int(round(substeps))
         namespaces = vehicle_namespaces(self.get_namespace(), names)
-        model = QuadrotorModel(params, disturbances)
+        plant = declare(self, 'plant', DEFAULT_PLANT, "what the simulator flies: quad_sim (our model of the paper's "
+                        'eq. 1) or rotorpy (RotorPy, its aerodynamics and motor model; docs/ROTORPY.md)',
+                        choices=PLANTS, read_only='the plant is built at start')
+        model = make_plant(plant, params, disturbances)
         compile_kernels(model, 1.0 / physics_rate)   # before publishing: the first step is not slower than the others
         try:
             self.fleet = Fleet(model, 1.0 / physics_rate, split_initial_states(start, len(namespaces)))

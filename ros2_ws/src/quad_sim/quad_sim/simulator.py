@@ -21,7 +21,8 @@ from .perturbations.wind import Wind
 
 
 class Simulator:
-    """Steps :class:`QuadrotorModel` with a fixed physics step, holding the last accepted thrusts.
+    """Steps a plant (:class:`QuadrotorModel`, or another of :mod:`quad_sim.plants`) with a fixed physics step,
+    holding the last accepted thrusts.
 
     Sim time is kept in integer nanoseconds (``steps * physics_dt_ns``), the resolution of a ROS
     stamp, so the time in a message and the time in the core are the same number. Thrusts start
@@ -92,7 +93,7 @@ class Simulator:
         step, dt, lag, wind = self.model.step, self.physics_dt, self.motor_lag, self.wind
         for _ in range(steps):
             if self._changes and self.time >= self._changes[0].at_s:
-                self.model = QuadrotorModel(self._changes.pop(0).vehicle, self.model.disturbances)
+                self.model = self.model.with_vehicle(self._changes.pop(0).vehicle)
                 step = self.model.step
             thrusts = self.forces if lag is None else lag.step(self.forces)
             air = None if wind is None else wind.step()

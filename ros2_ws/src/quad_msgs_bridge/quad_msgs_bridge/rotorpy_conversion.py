@@ -1,0 +1,175 @@
+"""Our vehicle, state and rotor thrusts <-> RotorPy's ``Multirotor`` (``rotorpy.vehicles.multirotor``).
+
+Pure functions, no RotorPy import: the plant (:mod:`quad_sim.rotorpy_plant`) is the only module that
+imports RotorPy, and everything it converts goes through here, once.
+
+Frames and units on both sides:
+
+=================  ===========================================  ==============================================
+quantity           our core state (:mod:`quad_msgs_bridge.state`)  RotorPy's state dict
+=================  ===========================================  ==============================================
+position           x, y, z [m, world ENU]                        ``x`` (3,) [m, world, z up]
+velocity           vx, vy, vz [m/s, world ENU]                   ``v`` (3,) [m/s, world]
+attitude           phi, theta, psi [rad], Z-Y-X Euler angles     ``q`` (4,) unit quaternion (i, j, k, w),
+                                                                 scalar last, body -> world
+angular velocity   dphi, dtheta, dpsi [rad/s], *Euler rates*     ``w`` (3,) body rates p, q, r [rad/s, body FLU]
+air                (the wind model's velocity, not in the state)  ``wind`` (3,) air velocity [m/s, world]
+rotors             (our thrusts are held commands, no state)     ``rotor_speeds`` (4,) [rad/s]
+=================  ===========================================  ==============================================
+
+The Euler rates <-> body rates conversion is the exact one of :mod:`quad_msgs_bridge.frames`, not the
+small-angle shortcut. Both worlds have z up and a body frame x forward, y left, z up (FLU), so
+positions, velocities and vectors pass unchanged.
+
+Rotor thrusts: our ``rotor_forces`` F1..F4 [N] (order and layout: :mod:`quad_msgs_bridge.mixer`) are
+RotorPy's ``cmd_motor_thrusts`` [N], in the same order (RotorPy's rotors r1..r4 are ours, at the
+positions :func:`rotor_layout` gives). RotorPy turns a thrust into a rotor speed through its thrust
+coefficient k_eta = Kp [N/(rad/s)^2] (T = k_eta w^2) and the reaction torque is k_m w^2 with
+k_m = Kd [N m/(rad/s)^2], so k_m / k_eta = Kd / Kp, the yaw coefficient of eq. (2).
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from quad_msgs_bridge.frames import _body_rates, _euler, _euler_rates, _quaternion, check_orientation, check_pitch
+from quad_msgs_bridge.state import STATE_SIZE
+from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
+
+#: RotorPy's sign of each rotor's reaction torque about body +z for the paper's "+" layout (F1 front, F2 right,
+#: F3 back, F4 left): F2 and F4 turn clockwise seen from above (reaction torque +z), F1 and F3 counter-clockwise.
+PLUS_REACTION_SIGNS = (-1.0, 1.0, -1.0, 1.0)
+
+#: RotorPy's aerodynamic coefficients of its packaged "hummingbird" vehicle (rotorpy 3.0.0,
+#: ``rotorpy/vehicles/hummingbird_params.py``: an AscTec Hummingbird, 0.5 kg), from which
+#: :func:`aero_coefficients` scales a vehicle's own. Units as RotorPy states them.
+HUMMINGBIRD = {'mass': 0.5, 'k_eta': 5.57e-06, 'g': 9.81,
+               'c_Dx': 0.5e-2, 'c_Dy': 0.5e-2, 'c_Dz': 1e-2,   # parasitic drag [N/(m/s)^2]
+               'k_d': 1.19e-04, 'k_z': 2.32e-04,                # rotor drag, induced inflow [N/(rad/s * m/s)]
+               'k_h': 3.39e-3, 'k_flap': 0.0}                   # translational lift [N/(m/s)^2], flapping [N m/(rad/s * m/s)]
+
+#: RotorPy's motor time constant of the same vehicle [s]: the default of the RotorPy plant's motor model.
+ROTORPY_MOTOR_TIME_CONSTANT = 0.005
+
+
+def hover_rotor_speed(mass: float, g: float, k_eta: float) -> float:
+    """Rotor speed [rad/s] at which four rotors of thrust coefficient k_eta [N/(rad/s)^2] carry mass [kg]."""
+    return math.sqrt(mass * g / (4.0 * k_eta))
+
+
+def aero_coefficients(params: VehicleParams) -> dict:
+    """RotorPy's aerodynamic coefficients for ``params``: the hummingbird's, scaled so that each effect gives
+    the same *acceleration* at the same airspeed (and, for the rotor terms, at hover rotor speed).
+
+    Rule (m mass [kg], w_h hover rotor speed [rad/s], hb the hummingbird): parasitic drag
+    D = -|v| c_D v and translational lift k_h v^2 per rotor scale with the mass, c_D = c_D,hb m / m_hb,
+    k_h = k_h,hb m / m_hb; rotor drag and induced inflow H = -w k_d v per rotor scale with the mass over the
+    hover speed, k_d = k_d,hb (m / m_hb) (w_h,hb / w_h), the same for k_z; the flapping moment is zero, as in
+    the hummingbird. Our vehicle files carry no measured RotorPy coefficients, so this is a stand-in
+    of the right size, not an identification."""
+    hb = HUMMINGBIRD
+    mass_ratio = params.m / hb['mass']
+    speed_ratio = (hover_rotor_speed(hb['mass'], hb['g'], hb['k_eta'])
+                   / hover_rotor_speed(params.m, params.g, params.Kp))
+    return {'c_Dx': hb['c_Dx'] * mass_ratio, 'c_Dy': hb['c_Dy'] * mass_ratio, 'c_Dz': hb['c_Dz'] * mass_ratio,
+            'k_d': hb['k_d'] * mass_ratio * speed_ratio, 'k_z': hb['k_z'] * mass_ratio * speed_ratio,
+            'k_h': hb['k_h'] * mass_ratio, 'k_flap': hb['k_flap']}
+
+
+def rotor_layout(params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (4, 3) [m, body FLU] of rotors F1..F4 about the *centre of gravity*, reaction-torque signs (4,)).
+
+    A vehicle with explicit ``rotor_positions`` ((x, y) or (x, y, z) [m, body FLU] from the geometric centre)
+    and ``rotor_directions`` (+1: counter-clockwise seen from above, so a reaction torque about -z) uses them;
+    otherwise the paper's "+" layout: F1 (d, 0), F2 (0, -d), F3 (-d, 0), F4 (0, d), F2 and F4 clockwise.
+    RotorPy takes positions about the centre of mass, so a centre-of-gravity offset c is subtracted: that is
+    how our model's extra moments (-c_y U1 roll, c_x U1 pitch) arise in RotorPy.
+    """
+    positions = getattr(params, 'rotor_positions', None)
+    if positions is None:
+        d = params.d
+        positions = ((d, 0.0, 0.0), (0.0, -d, 0.0), (-d, 0.0, 0.0), (0.0, d, 0.0))
+        signs = np.array(PLUS_REACTION_SIGNS)
+    else:
+        positions = [tuple(p) + (0.0,) * (3 - len(p)) for p in positions]
+        signs = -np.array(params.rotor_directions, dtype=float)
+    return np.array(positions, dtype=float) - np.array(params.cog_offset, dtype=float), signs
+
+
+def check_representable(params: VehicleParams) -> None:
+    """ParameterError unless RotorPy can fly ``params`` as our model does: one thrust and one torque
+    coefficient shared by every rotor, so per-rotor thrust and drag factors must be equal (a rotor's
+    efficiency loss then scales its command, see :func:`motor_thrust_commands`)."""
+    for name in ('m', 'Ix', 'Kp', 'F_max'):
+        if isinstance(getattr(params, name), np.ndarray):
+            raise ParameterError(f'plant rotorpy: one vehicle at a time, got an array for {name}')
+    if any(abs(f - g) > 1e-12 for f, g in zip(params.rotor_thrust_factors, params.rotor_drag_factors)):
+        raise ParameterError(f'plant rotorpy: rotor_thrust_factors {tuple(params.rotor_thrust_factors)} must equal '
+                             f'rotor_drag_factors {tuple(params.rotor_drag_factors)} (RotorPy has one k_m/k_eta '
+                             'for every rotor)')
+
+
+def quad_params(params: VehicleParams, aero: dict, motor_time_constant_s: float) -> dict:
+    """RotorPy's ``quad_params`` dict of our vehicle (SI units as in the vehicle file).
+
+    mass, Ixx, Iyy, Izz [kg m^2] (no products of inertia), rotor_pos and rotor_directions of
+    :func:`rotor_layout`, k_eta = Kp, k_m = Kd, rotor speeds [rad/s] from F_min, F_max [N] through k_eta,
+    tau_m = ``motor_time_constant_s`` [s] (RotorPy divides by it: 0 becomes a placeholder the plant never
+    integrates, see :class:`quad_sim.rotorpy_plant.RotorPyPlant`), the aerodynamic coefficients ``aero``
+    (:func:`aero_coefficients`; they act only when the plant's aero is on). Our translational drag
+    Kfx..Kfz and rotational friction Kfphi..Kfpsi have no counterpart in RotorPy and are not used.
+    """
+    check_representable(params)
+    positions, signs = rotor_layout(params)
+    return {'mass': params.m, 'Ixx': params.Ix, 'Iyy': params.Iy, 'Izz': params.Iz, 'Ixy': 0.0, 'Ixz': 0.0,
+            'Iyz': 0.0, 'num_rotors': 4,
+            'rotor_pos': {f'r{i + 1}': positions[i] for i in range(4)}, 'rotor_directions': signs,
+            'k_eta': params.Kp, 'k_m': params.Kd,
+            'rotor_speed_min': math.sqrt(params.F_min / params.Kp),
+            'rotor_speed_max': math.sqrt(params.F_max / params.Kp),
+            'tau_m': motor_time_constant_s if motor_time_constant_s > 0.0 else 1.0, 'motor_noise_std': 0.0,
+            **aero}
+
+
+def motor_thrust_commands(forces: Sequence[float], params: VehicleParams) -> np.ndarray:
+    """RotorPy's ``cmd_motor_thrusts`` [N] (4,) for our commanded rotor thrusts F1..F4 [N].
+
+    Each command is clipped to [F_min, F_max] (as our model does), then scaled by the rotor's thrust
+    factor and efficiency (f_i (1 - l_i)): a weaker rotor gives less thrust and reaction torque for the
+    same command, as in our model."""
+    clipped = np.clip(np.asarray(forces, dtype=float), params.F_min, params.F_max)
+    gains = np.array(params.rotor_thrust_factors, dtype=float) * (1.0 - np.array(params.rotor_efficiency_loss,
+                                                                                   dtype=float))
+    return clipped * gains
+
+
+def rotor_speeds_of(thrusts: np.ndarray, k_eta: float) -> np.ndarray:
+    """Rotor speeds [rad/s] that give ``thrusts`` [N] (T = k_eta w^2; a negative thrust gives speed 0)."""
+    return np.sqrt(np.maximum(thrusts, 0.0) / k_eta)
+
+
+def rotorpy_state(state: Sequence[float], rotor_speeds: np.ndarray, air_velocity: Sequence[float] | None) -> dict:
+    """RotorPy's state dict of our 12-state ``state`` (one vehicle), the rotor speeds [rad/s] and the air velocity
+    [m/s, world ENU] (None: still air)."""
+    if len(state) != STATE_SIZE:
+        raise ValueError(f'state has {len(state)} components, expected {STATE_SIZE}')
+    x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = (float(v) for v in state)
+    return {'x': np.array([x, y, z]), 'v': np.array([vx, vy, vz]),
+            'q': np.array(_quaternion(phi, theta, psi)),
+            'w': np.array(_body_rates(phi, theta, dphi, dtheta, dpsi)),
+            'wind': np.zeros(3) if air_velocity is None else np.array(air_velocity, dtype=float),
+            'rotor_speeds': np.array(rotor_speeds, dtype=float)}
+
+
+def state_from_rotorpy(rotorpy: dict) -> list[float]:
+    """Our 12-state of RotorPy's state dict; ValueError if its quaternion is no rotation or at gimbal lock."""
+    qx, qy, qz, qw = (float(v) for v in rotorpy['q'])
+    phi, theta, psi, norm = _euler(qx, qy, qz, qw)
+    check_orientation((qx, qy, qz, qw), norm)
+    p, q, r = (float(v) for v in rotorpy['w'])
+    dphi, dtheta, dpsi, cos_theta = _euler_rates(phi, theta, p, q, r)
+    check_pitch(theta, cos_theta)
+    return [*(float(v) for v in rotorpy['x']), *(float(v) for v in rotorpy['v']), phi, theta, psi,
+            dphi, dtheta, dpsi]

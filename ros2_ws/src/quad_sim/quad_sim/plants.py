@@ -1,0 +1,29 @@
+"""Which plant a simulator flies: our model of the paper's eq. (1) (``quad_sim``) or RotorPy's ``Multirotor``
+(``rotorpy``). Both have ``step(t, state, forces, dt, air_velocity)``, ``params``, ``disturbances`` and
+``with_vehicle(params)``, so :class:`~quad_sim.simulator.Simulator` and everything above it are the same."""
+from __future__ import annotations
+
+from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams
+
+from .model import QuadrotorModel
+
+PLANTS = ('quad_sim', 'rotorpy')   #: the plant names of --plant, the campaign key plant and the node parameter
+DEFAULT_PLANT = 'quad_sim'
+
+
+def check_plant(name: str, argument: str = 'plant') -> str:
+    """``name`` if it is one of PLANTS, else ParameterError naming ``argument`` and the valid names."""
+    if name not in PLANTS:
+        raise ParameterError(f'{argument}: {name!r} is not a plant; valid: {", ".join(PLANTS)}')
+    return name
+
+
+def make_plant(name: str, params: VehicleParams, disturbances: Disturbances):
+    """The plant ``name`` flying the true vehicle ``params`` (one vehicle or a batch) under ``disturbances``.
+
+    ``rotorpy``: RotorPy with its aerodynamics and its motor model on (:class:`~quad_sim.rotorpy_plant.RotorPyPlant`
+    defaults); ParameterError if RotorPy is not installed or cannot represent the vehicle."""
+    if check_plant(name) == 'rotorpy':
+        from .rotorpy_plant import RotorPyPlant
+        return RotorPyPlant(params, disturbances)
+    return QuadrotorModel(params, disturbances)
