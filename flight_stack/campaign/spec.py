@@ -27,7 +27,7 @@ left out means no such perturbation; other tools write these files, so the names
     physics_rate_hz: 1000      # a whole multiple of control_rate_hz (default: equal to it)
     measurement_filters: true  # every controller reads through the gains file's measurement stage
                                # (common.measurement_filter_hz, common.velocity_filter_hz); false: none
-    plant: quad_sim            # what the simulator flies: quad_sim (our model) or rotorpy (docs/ROTORPY.md)
+    plant: quad_sim            # what the simulator flies: quad_sim (our model), rotorpy or rotorpy-bare (docs/ROTORPY.md)
 
 ``inertia`` draws Ix, Iy and Iz on their own. A distribution is a number (relative uniform half
 width), ``{dist: uniform, half_width: x}`` or ``{dist: normal, std: s}``; relative draws must keep a
@@ -292,7 +292,7 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
         plant=check_plant(top.get('plant', DEFAULT_PLANT), 'plant'),
         source=source)
     unrepresentable = [key for key in ('thrust_coefficient', 'drag_coefficient') if key in spec.vehicle]
-    if spec.plant == 'rotorpy' and unrepresentable:
+    if spec.plant.startswith('rotorpy') and unrepresentable:
         raise ParameterError(f'vehicle.{unrepresentable[0]}: not with plant rotorpy (RotorPy has one thrust and one '
                              'torque coefficient for every rotor); leave it out or fly plant quad_sim')
     if 'rotor_efficiency_loss' in spec.vehicle and spec.vehicle['rotor_efficiency_loss'].bound >= 1.0:

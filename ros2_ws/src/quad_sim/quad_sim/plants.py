@@ -7,7 +7,9 @@ from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, Vehicl
 
 from .model import QuadrotorModel
 
-PLANTS = ('quad_sim', 'rotorpy')   #: the plant names of --plant, the campaign key plant and the node parameter
+#: the plant names of --plant, the campaign key plant and the node parameter: our model; RotorPy with its
+#: aerodynamics and motor model; RotorPy's rigid body and rotors alone (aero off, instant motors), to compare with ours
+PLANTS = ('quad_sim', 'rotorpy', 'rotorpy-bare')
 DEFAULT_PLANT = 'quad_sim'
 
 
@@ -22,8 +24,11 @@ def make_plant(name: str, params: VehicleParams, disturbances: Disturbances):
     """The plant ``name`` flying the true vehicle ``params`` (one vehicle or a batch) under ``disturbances``.
 
     ``rotorpy``: RotorPy with its aerodynamics and its motor model on (:class:`~quad_sim.rotorpy_plant.RotorPyPlant`
-    defaults); ParameterError if RotorPy is not installed or cannot represent the vehicle."""
-    if check_plant(name) == 'rotorpy':
-        from .rotorpy_plant import RotorPyPlant
-        return RotorPyPlant(params, disturbances)
-    return QuadrotorModel(params, disturbances)
+    defaults); ``rotorpy-bare``: with both off. ParameterError if RotorPy is not installed or cannot represent
+    the vehicle."""
+    if check_plant(name) == 'quad_sim':
+        return QuadrotorModel(params, disturbances)
+    from .rotorpy_plant import RotorPyPlant
+    if name == 'rotorpy-bare':
+        return RotorPyPlant(params, disturbances, aero=False, motor_time_constant_s=0.0)
+    return RotorPyPlant(params, disturbances)
