@@ -563,6 +563,7 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
 @pytest.mark.parametrize('module, params, name', [
     ('quad_sim.sim_node', {'physics_rate': -5.0}, 'physics_rate'),
     ('quad_sim.sim_node', {'mode': 'warp'}, 'mode'),
+    ('quad_sim.sim_node', {'plant': 'gazebo'}, 'plant'),
     ('nnit2fsmc_controller.controller_node', {'nnit2fsmc.axes.x.fuzzy_gain': -1.0}, 'nnit2fsmc.axes.x.fuzzy_gain'),
     ('nnit2fsmc_controller.controller_node', {'controller': 'lqr'}, 'controller'),
     ('nnit2fsmc_controller.controller_node', {'common.allocation': 'scale'}, 'common.allocation'),
