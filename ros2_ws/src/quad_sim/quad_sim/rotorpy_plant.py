@@ -4,8 +4,9 @@ RotorPy (``pip install rotorpy==3.0.0``, Spencer Folk et al., University of Penn
 multirotor simulator nobody here wrote. Its ``Multirotor`` integrates the rigid body exactly (quaternion
 attitude, body rates, Newton-Euler), first-order motors on the rotor speeds (tau_m), and, with ``aero``,
 parasitic drag, rotor drag (H-force), induced inflow, translational lift and blade flapping, with the air
-velocity of a wind model. Each step is ``scipy.integrate.solve_ivp`` (RK45, RotorPy's default) of one
-vehicle, in Python: about 1 ms of wall time per physics step (docs/ROTORPY.md).
+velocity of a wind model. Each step is ``scipy.integrate.solve_ivp`` (RK45 and its tolerances, RotorPy's
+defaults, trying the whole step first) of one vehicle, in Python: about 1 ms of wall time per physics step,
+some 500 times our compiled step (bench/bench_plants.py, docs/ROTORPY.md).
 
 What is converted, and how, is :mod:`quad_msgs_bridge.rotorpy_conversion`; this module only drives RotorPy.
 Three things are added around RotorPy's vehicle, so that the same world is flown on both plants:
@@ -91,6 +92,9 @@ class _Vehicle:
             self.rotor_speeds = np.clip(rotor_speeds_of(thrusts, self.quad['k_eta']), self.quad['rotor_speed_min'],
                                         self.quad['rotor_speed_max'])
         self.multirotor.start = t
+        # RotorPy's integrator (RK45, its tolerances) trying the whole step first: solve_ivp's own first guess
+        # is tiny near an equilibrium (hover: 6 steps, 38 evaluations per 1 ms step instead of 1 step, 6)
+        self.multirotor.integrator_kwargs = {'method': 'RK45', 'first_step': dt}
         after = self.multirotor.step(rotorpy_state(s, self.rotor_speeds, air_velocity),
                                      {'cmd_motor_thrusts': thrusts}, dt)
         self.rotor_speeds = after['rotor_speeds']
