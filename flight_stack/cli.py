@@ -415,7 +415,8 @@ def run(argv: list[str]) -> int:
         return 2
     print(f'flying {plan.controller} on "{plan.scenario}" for {plan.duration:g} s '
           f'(disturbances {"on" if plan.disturbances.enabled else "off"}), {backend} backend'
-          + (f', {args.vehicles} vehicles' if args.vehicles > 1 else ''))
+          + (f', {args.vehicles} vehicles' if args.vehicles > 1 else '')
+          + (f', plant {plan.plant}' if plan.plant != 'quad_sim' else ''))
     try:
         return fly_and_report(args, plan, backend, output, bag_shown, live_view, speed_factor)
     except BaseException:
@@ -438,7 +439,7 @@ def summarize(flown: Flown, plan, backend: str) -> dict:
                             seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
                             disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
                             wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure,
-                            failure_time_s=flown.failure_time_s)
+                            failure_time_s=flown.failure_time_s, plant=plan.plant)
     summary.update(flown.extra)
     return summary
 

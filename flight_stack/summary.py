@@ -14,7 +14,7 @@ from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str, scenario: str, seed: int,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
                   physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None,
-                  failure_time_s: float | None = None) -> dict:
+                  failure_time_s: float | None = None, plant: str = 'quad_sim') -> dict:
     """Metrics of the flight (its metrics dict, e.g. ``Flight.metrics()``, or a FlightRecord to compute them
     from) plus everything needed to reproduce it.
 
@@ -23,7 +23,7 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
     the bag give it; without it, the time of the last step: of the record, or the metrics' duration), a state or force went
     non-finite or the largest position error after the settling window exceeds ``max_error`` [m];
     ``failures`` says which, ``failure`` and ``failure_time_s`` why and when it ended early (None if
-    it did not).
+    it did not). ``plant``: what the simulator flew (quad_sim.plants.PLANTS).
     """
     metrics = flight if isinstance(flight, dict) else flight_metrics(
         flight, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
@@ -47,6 +47,7 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
         'scenario': scenario,
         'seed': seed,
         'physics_rate_hz': physics_rate,
+        'plant': plant,
         'wall_time_s': wall_time_s,
         'real_time_factor': sim_time / wall_time_s if wall_time_s > 0 else None,
         'vehicle': dataclasses.asdict(params),

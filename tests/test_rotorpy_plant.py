@@ -139,6 +139,7 @@ def test_a_flight_on_rotorpy_writes_a_bag_that_read_flight_reads(tmp_path):
     read = read_flight(tmp_path / 'run' / 'bag')
     np.testing.assert_allclose(read.state, flown.state, atol=1e-9)
     assert flown.state[-1, 2] > 0.1      # it took off under RotorPy's aerodynamics and motors
+    assert flown.summary['plant'] == 'rotorpy'
 
 
 @needs_rotorpy

@@ -50,13 +50,13 @@ def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOp
                               campaign_seed=spec.seed, flight=flight) as bag:
             result = fly_embedded(controller, setup.trajectory, setup.nominal, setup.disturbances, setup.gains,
                                   spec.duration, 1.0 / setup.physics_dt, progress=options.progress, bag=bag,
-                                  perturbations=perturbations, rules=setup.rules(spec))
+                                  perturbations=perturbations, rules=setup.rules(spec), plant=spec.plant)
         summary = build_summary(result.record, backend='embedded', controller=controller, scenario=spec.scenario,
                                 seed=nn_seed, settle_time=spec.settle_time, params=setup.nominal,
                                 disturbances=setup.disturbances, gains=setup.gains,
                                 physics_rate=1.0 / setup.physics_dt, wall_time_s=result.wall_time_s,
                                 max_error=spec.max_error_m, failure=result.failure,
-                                failure_time_s=result.failure_time_s)
+                                failure_time_s=result.failure_time_s, plant=spec.plant)
         summary['campaign'] = {'seed': spec.seed, 'flight': flight, 'sampled': conditions.sampled_values(setup.nominal)}
         write_summary(summary, target)
         # reviewed from the record in memory (what the bag holds), as a single flight is: it knows whether
