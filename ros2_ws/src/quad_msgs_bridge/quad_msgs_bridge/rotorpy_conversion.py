@@ -88,6 +88,10 @@ def rotor_layout(params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
     how our model's extra moments (-c_y U1 roll, c_x U1 pitch) arise in RotorPy.
     """
     positions = getattr(params, 'rotor_positions', None)
+    frame = getattr(params, 'frame', 'plus')
+    if positions is None and frame != 'plus':
+        raise ParameterError(f'plant rotorpy: a vehicle of frame {frame!r} needs its rotor_positions and '
+                             'rotor_directions (only the "+" layout is derived from d)')
     if positions is None:
         d = params.d
         positions = ((d, 0.0, 0.0), (0.0, -d, 0.0), (-d, 0.0, 0.0), (0.0, d, 0.0))
