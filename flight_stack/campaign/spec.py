@@ -36,8 +36,8 @@ direction the wind blows towards, from +x (east) counter-clockwise; default: dra
 flight). ``sensor_noise`` entries are white-noise standard deviations, or ``{std: s, bias_std: b}``
 with a constant bias drawn per flight from N(0, b^2). An unknown key, a negative standard deviation,
 an empty controller list or ``flights: 0`` is refused before anything flies, naming the key.
-On ``plant: rotorpy`` a batch's vehicles are stepped one after the other by RotorPy (about 2 ms of wall
-time per vehicle and physics step), and ``vehicle.thrust_coefficient`` / ``drag_coefficient`` are
+On ``plant: rotorpy`` a batch's vehicles are stepped one after the other by RotorPy (2-3 ms of wall
+time per vehicle and physics step, bench/bench_plants.py), and ``vehicle.thrust_coefficient`` / ``drag_coefficient`` are
 refused (RotorPy shares one torque-to-thrust ratio between its rotors).
 """
 from __future__ import annotations

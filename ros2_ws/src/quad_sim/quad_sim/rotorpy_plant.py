@@ -5,8 +5,8 @@ multirotor simulator nobody here wrote. Its ``Multirotor`` integrates the rigid 
 attitude, body rates, Newton-Euler), first-order motors on the rotor speeds (tau_m), and, with ``aero``,
 parasitic drag, rotor drag (H-force), induced inflow, translational lift and blade flapping, with the air
 velocity of a wind model. Each step is ``scipy.integrate.solve_ivp`` (RK45 and its tolerances, RotorPy's
-defaults, trying the whole step first) of one vehicle, in Python: about 1 ms of wall time per physics step,
-some 500 times our compiled step (bench/bench_plants.py, docs/ROTORPY.md).
+defaults, trying the whole step first) of one vehicle, in Python: 2-3 ms of wall time per physics step,
+some 2000 times our compiled step (bench/bench_plants.py, docs/ROTORPY.md).
 
 What is converted, and how, is :mod:`quad_msgs_bridge.rotorpy_conversion`; this module only drives RotorPy.
 Three things are added around RotorPy's vehicle, so that the same world is flown on both plants:
