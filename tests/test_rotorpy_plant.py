@@ -14,8 +14,8 @@ from quad_msgs_bridge.rotorpy_conversion import (HUMMINGBIRD, aero_coefficients,
                                                  rotor_layout, rotorpy_state, state_from_rotorpy)
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
-needs_rotorpy = pytest.mark.skipif(importlib.util.find_spec('rotorpy') is None,
-                                   reason='RotorPy is not installed (pip install rotorpy==3.0.0, in requirements-test.txt)')
+needs_rotorpy = pytest.mark.skipif(importlib.util.find_spec('rotorpy') is None, reason='RotorPy is not installed '
+                                   '(pip install rotorpy==3.0.0, in requirements-test.txt)')
 
 PARAMS, DISTURBANCES = load_vehicle_file(None)
 #: the packaged vehicle without the drag and friction terms RotorPy has no counterpart of (Kf*)

@@ -48,7 +48,8 @@ PLUS_REACTION_SIGNS = (-1.0, 1.0, -1.0, 1.0)
 HUMMINGBIRD = {'mass': 0.5, 'k_eta': 5.57e-06, 'g': 9.81,
                'c_Dx': 0.5e-2, 'c_Dy': 0.5e-2, 'c_Dz': 1e-2,   # parasitic drag [N/(m/s)^2]
                'k_d': 1.19e-04, 'k_z': 2.32e-04,                # rotor drag, induced inflow [N/(rad/s * m/s)]
-               'k_h': 3.39e-3, 'k_flap': 0.0}                   # translational lift [N/(m/s)^2], flapping [N m/(rad/s * m/s)]
+               'k_h': 3.39e-3,                                  # translational lift [N/(m/s)^2]
+               'k_flap': 0.0}                                   # blade flapping [N m/(rad/s * m/s)]
 
 #: RotorPy's motor time constant of the same vehicle [s]: the default of the RotorPy plant's motor model.
 ROTORPY_MOTOR_TIME_CONSTANT = 0.005
