@@ -177,3 +177,14 @@ def test_fly_refuses_an_unknown_plant():
     from flight_stack.api import fly
     with pytest.raises(ParameterError, match='--plant'):
         fly('pid', 'hover', duration=1.0, plant='gazebo')
+
+
+@needs_rotorpy
+def test_run_stack_flies_the_plant_it_is_given(tmp_path, capsys):
+    import json
+    import run_stack
+    out = tmp_path / 'run'
+    assert run_stack.main(['--backend', 'embedded', '--quiet', '--plant', 'rotorpy-bare', '--controller', 'pid',
+                           '--scenario', 'hover', '--duration', '0.3', '--settle-time', '0.1', '--out', str(out)]) == 0
+    assert 'plant rotorpy-bare' in capsys.readouterr().out
+    assert json.loads((out / 'summary.json').read_text())['plant'] == 'rotorpy-bare'
