@@ -188,3 +188,13 @@ def test_run_stack_flies_the_plant_it_is_given(tmp_path, capsys):
                            '--scenario', 'hover', '--duration', '0.3', '--settle-time', '0.1', '--out', str(out)]) == 0
     assert 'plant rotorpy-bare' in capsys.readouterr().out
     assert json.loads((out / 'summary.json').read_text())['plant'] == 'rotorpy-bare'
+
+
+@needs_rotorpy
+def test_the_wind_reaches_rotorpys_aerodynamics_only():
+    from flight_stack.api import fly
+    wind = {'mean_speed_mps': 5.0, 'turbulence': 'none', 'direction_deg': 0.0}
+    calm, windy = (fly('pid', 'hover', duration=1.5, plant='rotorpy', wind=w) for w in (None, wind))
+    assert windy.state[-1, 0] - calm.state[-1, 0] > 1e-3            # blown downwind (+x) by RotorPy's drag
+    calm, windy = (fly('pid', 'hover', duration=1.5, plant='rotorpy-bare', wind=w) for w in (None, wind))
+    np.testing.assert_array_equal(windy.state, calm.state)           # no aerodynamics, nothing for the air to push
