@@ -40,7 +40,8 @@ __all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'F
 
 
 def load_vehicle(path: str | Path | None = None) -> VehicleParams:
-    """The vehicle description (paper Table I, SI units) of a vehicle YAML; None: the packaged one."""
+    """The vehicle description (paper Table I, SI units) of a vehicle YAML or of a shipped vehicle by name
+    ('paper', 'crazyflie', 'hummingbird', 'x500': docs/VEHICLES.md); None: the packaged one (the paper's)."""
     return load_vehicle_file(path)[0]
 
 

@@ -1,4 +1,6 @@
 """Paper eq. (2): rotor thrusts <-> U1..U4, its inverse and rotor saturation."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -147,3 +149,79 @@ def test_allocations_work_elementwise_on_arrays():
             np.testing.assert_allclose([f[i] for f in batch], single, rtol=0, atol=1e-15)
     with pytest.raises(ValueError, match='allocation'):
         allocate('scale', 5.0, 0.0, 0.0, 0.0, MIXER, F_MIN, F_MAX)
+
+
+# ---------------------------------------------------------------- every rotor layout (rotor_layout.py)
+ARM = PARAMS.d
+LAYOUTS = {
+    'plus': PARAMS,
+    'x': replace(PARAMS, frame='x'),
+    'x, spins mirrored (Crazyflie)': replace(PARAMS, frame='x', rotor_directions=(-1, 1, -1, 1)),
+    'custom: wide H frame': replace(PARAMS, frame='custom', rotor_directions=(1, -1, 1, -1), rotor_positions=(
+        (0.12, -0.2, 0.02), (-0.12, -0.2, 0.02), (-0.12, 0.2, -0.02), (0.12, 0.2, -0.02))),
+    'custom: skewed': replace(PARAMS, frame='custom', rotor_directions=(-1, 1, -1, 1), rotor_positions=(
+        (0.2, 0.05, 0.0), (-0.1, -0.22, 0.0), (-0.2, -0.05, 0.0), (0.1, 0.22, 0.0))),
+}
+
+
+def layout_wrench(params, forces):
+    """Thrust [N] and torque [N m, body FLU] from first principles: sum r_i x (0, 0, F_i) + the rotors'
+    reaction torques -s_i (Kd/Kp) F_i about +z (a counter-clockwise rotor pushes the body clockwise)."""
+    torque = sum(np.cross(r, [0.0, 0.0, f]) for r, f in zip(params.rotor_positions, forces))
+    reaction = -params.yaw_coefficient * float(np.dot(params.rotor_directions, forces))
+    return sum(forces), torque + np.array([0.0, 0.0, reaction])
+
+
+@pytest.mark.parametrize('layout', LAYOUTS)
+def test_eq2_matches_r_cross_f_in_every_layout(layout):
+    """d U2 is the roll torque, d U3 the pitch torque and U4 the yaw torque of eq. (1), whatever the layout."""
+    params = LAYOUTS[layout]
+    for forces in np.random.default_rng(5).uniform(0.0, F_MAX, (20, 4)):
+        u1, u2, u3, u4 = controls_from_forces(*forces, params.mixer)
+        thrust, torque = layout_wrench(params, forces)
+        assert u1 == pytest.approx(thrust, abs=1e-14)
+        np.testing.assert_allclose(torque, [ARM * u2, ARM * u3, u4], atol=1e-14)
+
+
+@pytest.mark.parametrize('layout', LAYOUTS)
+def test_mixer_and_inverse_round_trip_in_every_layout(layout):
+    mixer = LAYOUTS[layout].mixer
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        forces = tuple(rng.uniform(-1.0, 4.0, 4))
+        np.testing.assert_allclose(forces_from_controls(*controls_from_forces(*forces, mixer), mixer), forces,
+                                   atol=1e-12)
+        controls = (rng.uniform(0, 10), *rng.uniform(-2, 2, 2), rng.uniform(-0.05, 0.05))
+        np.testing.assert_allclose(controls_from_forces(*forces_from_controls(*controls, mixer), mixer), controls,
+                                   atol=1e-12)
+
+
+def test_the_x_frame_puts_its_rotors_on_the_diagonals_at_the_arm_length():
+    x = LAYOUTS['x']
+    expected = np.array([[1, -1, 0], [-1, -1, 0], [-1, 1, 0], [1, 1, 0]]) * ARM / np.sqrt(2.0)
+    np.testing.assert_allclose(x.rotor_positions, expected, atol=1e-15)
+    assert x.rotor_names == ('F1_front_right', 'F2_back_right', 'F3_back_left', 'F4_front_left')
+    # a pure roll demand d U2 [N m] raises the left rotors (3, 4) and lowers the right ones (1, 2) alike:
+    # d U2 = (d / sqrt 2) (F3 + F4 - F1 - F2)
+    f1, f2, f3, f4 = forces_from_controls(PARAMS.m * PARAMS.g, 0.2, 0.0, 0.0, x.mixer)
+    assert f1 == pytest.approx(f2) and f3 == pytest.approx(f4) and f3 - f1 == pytest.approx(0.2 / np.sqrt(2.0))
+
+
+@pytest.mark.parametrize('layout', LAYOUTS)
+def test_priority_allocation_properties_in_every_layout(layout):
+    """As test_priority_allocation_properties, for each layout (the allocation pairs opposite rotors)."""
+    params = LAYOUTS[layout]
+    mixer = params.mixer
+    rng = np.random.default_rng(21)
+    for _ in range(300):
+        demand = (rng.uniform(-2.0, 13.0), *rng.normal(0.0, 1.5, 2), rng.normal(0.0, 0.03))
+        forces = priority_allocation(*demand, mixer, F_MIN, F_MAX)
+        u1, u2, u3, u4 = controls_from_forces(*forces, mixer)
+        assert all(F_MIN <= f <= F_MAX for f in forces)
+        assert u1 == pytest.approx(min(max(demand[0], 4 * F_MIN), 4 * F_MAX), abs=1e-12)
+        factor = u2 / demand[1]
+        assert -1e-12 <= factor <= 1 + 1e-12 and u3 == pytest.approx(factor * demand[2], abs=1e-12)
+        assert u4 * demand[3] >= -1e-15 and abs(u4) <= abs(demand[3]) + 1e-15
+        exact = forces_from_controls(*demand, mixer)
+        if all(F_MIN <= f <= F_MAX for f in exact):
+            np.testing.assert_allclose(forces, exact, atol=1e-15)

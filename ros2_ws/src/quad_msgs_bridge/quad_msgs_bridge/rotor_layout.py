@@ -32,8 +32,9 @@ from typing import NamedTuple, Sequence
 FRAMES = ('plus', 'x', 'custom')
 
 _NAMES = {'plus': ('F1_front', 'F2_right', 'F3_back', 'F4_left'),
-          'x': ('F1_front_right', 'F2_back_right', 'F3_back_left', 'F4_front_left'),
-          'custom': ('F1', 'F2', 'F3', 'F4')}
+          'x': ('F1_front_right', 'F2_back_right', 'F3_back_left', 'F4_front_left')}
+#: the bearing of a rotor, atan2(y, x) in multiples of 45 degrees from +x (front), as a word
+_BEARINGS = ('front', 'front_left', 'left', 'back_left', 'back', 'back_right', 'right', 'front_right')
 
 #: spin of F1..F4 in the plus and x frames (+1 counter-clockwise seen from above)
 STANDARD_DIRECTIONS = (1, -1, 1, -1)
@@ -59,9 +60,18 @@ class RotorMixer(NamedTuple):
     spin: float           #: [-] s_1
 
 
-def rotor_names(frame: str) -> tuple[str, str, str, str]:
-    """Labels of F1..F4 in ``frame`` (the ``rotor_forces`` layout label, plot labels)."""
-    return _NAMES[frame]
+def rotor_names(frame: str, positions: Sequence[Sequence[float]] | None = None) -> tuple[str, str, str, str]:
+    """Labels of F1..F4 (the ``rotor_forces`` layout label, plot labels): 'F1_front' ... in the plus
+    frame, 'F1_front_right' ... in the x frame; in a custom layout (``positions`` [m, body FLU]) the
+    rotor's bearing when it lies within 0.5 degrees of one of the eight compass directions, else 'F<i>'."""
+    if frame != 'custom':
+        return _NAMES[frame]
+    names = []
+    for i, (x, y, _) in enumerate(positions):
+        eighths = math.atan2(y, x) / (math.pi / 4.0)
+        near = round(eighths)
+        names.append(f'F{i + 1}_{_BEARINGS[near % 8]}' if abs(eighths - near) * 45.0 < 0.5 else f'F{i + 1}')
+    return tuple(names)
 
 
 def frame_positions(frame: str, d: float) -> tuple:

@@ -27,6 +27,8 @@ from quad_msgs_bridge.rotor_layout import (FRAMES, STANDARD_DIRECTIONS, RotorMix
                                            rotor_mixer, rotor_names)
 
 DEFAULT_VEHICLE_FILE = Path(__file__).resolve().parent / 'config' / 'vehicle.yaml'
+#: the shipped vehicles of real quadrotors, by name (docs/VEHICLES.md); 'paper' is DEFAULT_VEHICLE_FILE
+SHIPPED_VEHICLES = Path(__file__).resolve().parent / 'config' / 'vehicles'
 
 #: [N s/m] Linear drag of the whole vehicle against the air, used when a wind model is on. RotorPy's
 #: AscTec Hummingbird (0.500 kg; rotorpy/vehicles/hummingbird_params.py) has the rotor drag
@@ -147,8 +149,9 @@ class VehicleParams:
     d U3 + c_x U1 (c_z drops out: every thrust is parallel to body z).
 
     Rotor layout (:mod:`quad_msgs_bridge.rotor_layout`): ``frame`` 'plus' (the paper's, the default) or
-    'x' places the rotors at the arm length d (``rotor_directions`` may mirror the spins); 'custom'
-    takes ``rotor_positions`` and ``rotor_directions`` as given. After construction both hold the
+    'x' places the rotors at the arm length d, in place of any ``rotor_positions`` given
+    (``rotor_directions`` may mirror the spins); 'custom' takes ``rotor_positions`` and
+    ``rotor_directions`` as given. After construction both hold the
     layout in use: ``rotor_positions`` four (x, y, z) [m, body FLU] from the geometric centre, in the
     order F1..F4 of ``rotor_forces``, and ``rotor_directions`` four +1 (counter-clockwise seen from
     above) or -1. A batch flies one layout.
@@ -221,10 +224,7 @@ class VehicleParams:
                     raise ParameterError(f'vehicle.d: a batch flies one rotor layout, but frame {self.frame} places '
                                          f'the rotors at different arm lengths {arm.tolist()}')
                 arm = float(arm[0])
-            positions = frame_positions(self.frame, arm)
-            if self.rotor_positions is not None and _rotor_positions(self.rotor_positions) != positions:
-                raise ParameterError(f'vehicle.rotor_positions: frame {self.frame} places the rotors at the arm length '
-                                     f'd = {arm} m, at {positions}; give frame: custom to place them otherwise')
+            positions = frame_positions(self.frame, arm)     # replaces any given (dataclasses.replace carries them)
         problem = layout_problem(positions, directions)
         if problem:
             raise ParameterError(f'vehicle.rotor_positions: the mixer cannot allocate for this layout: {problem}')
@@ -259,7 +259,7 @@ class VehicleParams:
     @property
     def rotor_names(self) -> tuple[str, str, str, str]:
         """Labels of F1..F4 in this layout (e.g. 'F1_front' in the plus frame): plots, ``rotor_forces``."""
-        return rotor_names(self.frame)
+        return rotor_names(self.frame, self.rotor_positions)
 
     @cached_property
     def mixer(self) -> RotorMixer:
@@ -269,13 +269,18 @@ class VehicleParams:
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> 'VehicleParams':
         """The description in a YAML/JSON mapping: Table I keys required, the perturbation and layout keys
-        optional (rotor positions without a frame make the frame custom)."""
+        optional (rotor positions without a frame make the frame custom; with frame plus or x they must
+        be the frame's, as a description written by ``dataclasses.asdict`` has them)."""
         names = [f.name for f in fields(cls)]
         _check_keys('vehicle', values, [n for n in names if n not in _OPTIONAL], _OPTIONAL)
         chosen = {name: values[name] for name in names if name in values}
-        if 'rotor_positions' in chosen and 'frame' not in chosen:
-            chosen['frame'] = 'custom'
-        return cls(**chosen)
+        if 'rotor_positions' in chosen:
+            chosen.setdefault('frame', 'custom')
+        params = cls(**chosen)
+        if 'rotor_positions' in chosen and _rotor_positions(chosen['rotor_positions']) != params.rotor_positions:
+            raise ParameterError(f'vehicle.rotor_positions: frame {params.frame} places the rotors itself (at '
+                                 f'{params.rotor_positions}); leave out frame (or give frame: custom) to place them')
+        return params
 
     @classmethod
     def stack(cls, vehicles: Sequence['VehicleParams']) -> 'VehicleParams':
@@ -373,13 +378,31 @@ class Disturbances:
         return cls(enabled=enabled, **channels)
 
 
+def shipped_vehicles() -> dict[str, Path]:
+    """The shipped vehicle files by name: 'paper' (the packaged default) and those of SHIPPED_VEHICLES."""
+    return {'paper': DEFAULT_VEHICLE_FILE, **{p.stem: p for p in sorted(SHIPPED_VEHICLES.glob('*.yaml'))}}
+
+
+def locate_vehicle(path: str | Path | None) -> Path:
+    """The vehicle file of ``path``: a file that exists, else the shipped vehicle of that name
+    (``x500`` or ``x500.yaml``), else ``path`` as given; None: the packaged default."""
+    if path is None:
+        return DEFAULT_VEHICLE_FILE
+    path = Path(path)
+    if path.exists() or path.parent != Path('.'):
+        return path
+    return shipped_vehicles().get(path.name[:-len('.yaml')] if path.suffix == '.yaml' else path.name, path)
+
+
 def load_vehicle_file(path: str | Path | None = None) -> tuple[VehicleParams, Disturbances]:
-    """Read and validate a vehicle YAML file (default: the packaged ``config/vehicle.yaml``)."""
-    path = Path(path) if path is not None else DEFAULT_VEHICLE_FILE
+    """Read and validate a vehicle YAML file, or a shipped vehicle by name (:func:`locate_vehicle`;
+    default: the packaged ``config/vehicle.yaml``, the paper's)."""
+    path = locate_vehicle(path)
     try:
         document = yaml.safe_load(path.read_text())
     except OSError as error:
-        raise ParameterError(f'vehicle file {path}: {error.strerror}') from error
+        raise ParameterError(f'vehicle file {path}: {error.strerror} (shipped vehicles: '
+                             f'{", ".join(shipped_vehicles())})') from error
     except yaml.YAMLError as error:
         raise ParameterError(f'vehicle file {path}: not valid YAML ({error})') from error
     _check_keys(str(path), document or {}, ['vehicle', 'disturbances'])
