@@ -192,6 +192,7 @@ def test_the_static_transforms_place_the_rotor_links_of_every_vehicle():
 def test_the_simulator_publishes_the_urdf_latched(ros_node):
     """A reader that subscribes after the simulator started still gets the URDF (transient local)."""
     from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import DurabilityPolicy
 
     from quad_msgs_bridge.contract import ROBOT_DESCRIPTION
     from quad_msgs_bridge.conversions import rclpy_kit
@@ -217,5 +218,5 @@ def test_the_simulator_publishes_the_urdf_latched(ros_node):
         executor.remove_node(sim)
         sim.destroy_node()
     assert ROBOT_DESCRIPTION.qos.durability == 'transient_local'
-    assert 'TRANSIENT_LOCAL' in str(info.qos_profile.durability)
+    assert info.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL
     assert received and received[0].data == vehicle_urdf(load_vehicle(None), '')
