@@ -146,14 +146,17 @@ PACKAGED_GAINS_CANNOT_LIFT = {('x500', kind) for kind in ('nnit2fsmc', *ABLATION
 @pytest.mark.parametrize('kind', CONTROLLERS)
 def test_every_kind_flies_every_shipped_vehicle(request, name, kind):
     """The packaged gains, the vehicle's own file (its section IV disturbances scaled to its mass and inertia):
-    a hover flight ends at the hover point, upright, with no failure."""
+    a hover flight takes off and holds still near the hover point, upright, with no failure. Near: within
+    0.25 m, as `nnit2fsmc-nolearn` (no network learning) holds the paper's own vehicle 0.2 m low under the
+    section IV bias forces; every other kind ends within 3 cm of it here."""
     if (name, kind) in PACKAGED_GAINS_CANNOT_LIFT:
         request.applymarker(pytest.mark.xfail(strict=True, reason='packaged gains in newtons: network cap below '
                                                                   "the x500's weight (issue 28, gains)"))
     flight = fly(kind, 'hover', duration=8.0, vehicle=name)
     assert flight.summary.get('failure') is None
-    end = flight.state[-1]
-    assert math.dist(end[:3], (0.0, 0.0, 1.0)) < 0.05 and abs(end[6]) < 0.1 and abs(end[7]) < 0.1
+    end, two_seconds_before = flight.state[-1], flight.state[flight.time <= flight.time[-1] - 2.0][-1]
+    assert math.dist(end[:3], (0.0, 0.0, 1.0)) < (0.25 if kind == 'nnit2fsmc-nolearn' else 0.03)
+    assert math.dist(end[:3], two_seconds_before[:3]) < 0.01 and abs(end[6]) < 0.1 and abs(end[7]) < 0.1
 
 
 # ---------------------------------------------------------------- the vehicle as URDF
