@@ -1,6 +1,6 @@
 """Paper eq. (2): rotor thrusts F1..F4 <-> virtual controls U1..U4, and rotor saturation, for a rotor layout.
 
-The layout (:mod:`quad_msgs_bridge.rotor_layout`; a vehicle's ``VehicleParams.mixer``) says where rotors
+The layout (:mod:`quad_msgs_bridge.rotor_layout`; a vehicle's ``VehicleParams.mixer``, an array) says where rotors
 F1..F4 (the order of the ``rotor_forces`` array) sit and which way they spin. In the paper's "+"
 frame F1 is front (+x, body FLU), F2 right (-y), F3 back (-x), F4 left (+y), F2 and F4 turn
 clockwise seen from above (their reaction torque is +z): then U2 = F4 - F2, U3 = F3 - F1 and
@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.numeric import every, select
-from quad_msgs_bridge.rotor_layout import rotor_names
+from quad_msgs_bridge.rotor_layout import PAIRS, PITCH, ROLL, SPIN, YAW, YAW_COEFFICIENT, rotor_names
 
 ROTOR_NAMES = rotor_names('plus')   #: F1..F4 of the paper's "+" frame (a vehicle's own: VehicleParams.rotor_names)
 ALLOCATIONS = ('priority', 'clip')   #: how U1..U4 beyond the rotor limits become thrusts (:func:`allocate`)
@@ -25,33 +25,27 @@ CONTROL_UNITS = ('N', 'N', 'N', 'N m')   #: of U1..U4
 
 
 @njit(cache=True, inline='always')
-def wrench_from_thrusts(t1, t2, t3, t4, roll, pitch, yaw, yaw_coefficient):
-    """Eq. (2) of a layout: (U1 [N], U2 [N], U3 [N], U4 [N m]) from rotor thrusts [N], with ``roll``,
-    ``pitch`` and ``yaw`` the per-rotor coefficients y_i/d, -x_i/d and -s_i (:class:`RotorMixer`)."""
-    return (t1 + t2 + t3 + t4,
-            roll[0] * t1 + roll[1] * t2 + roll[2] * t3 + roll[3] * t4,
-            pitch[0] * t1 + pitch[1] * t2 + pitch[2] * t3 + pitch[3] * t4,
-            yaw_coefficient * (yaw[0] * t1 + yaw[1] * t2 + yaw[2] * t3 + yaw[3] * t4))
-
-
-@njit(cache=True, inline='always')
 def controls_from_forces(f1, f2, f3, f4, mixer):
-    """Eq. (2): (U1 [N], U2 [N], U3 [N], U4 [N m]) from rotor thrusts [N] in the layout ``mixer``."""
-    return wrench_from_thrusts(f1, f2, f3, f4, mixer.roll, mixer.pitch, mixer.yaw, mixer.yaw_coefficient)
+    """Eq. (2): (U1 [N], U2 [N], U3 [N], U4 [N m]) from rotor thrusts [N] in the layout ``mixer`` (its
+    per-rotor coefficients y_i/d, -x_i/d, -s_i and Kd/Kp: :mod:`quad_msgs_bridge.rotor_layout`)."""
+    return (f1 + f2 + f3 + f4,
+            mixer[ROLL] * f1 + mixer[ROLL + 1] * f2 + mixer[ROLL + 2] * f3 + mixer[ROLL + 3] * f4,
+            mixer[PITCH] * f1 + mixer[PITCH + 1] * f2 + mixer[PITCH + 2] * f3 + mixer[PITCH + 3] * f4,
+            mixer[YAW_COEFFICIENT] * (mixer[YAW] * f1 + mixer[YAW + 1] * f2 + mixer[YAW + 2] * f3
+                                      + mixer[YAW + 3] * f4))
 
 
 @njit(cache=True, inline='always')
 def pair_torques(u2, u3, mixer):
     """(t13, t24) [N]: the thrust differences F3 - F1 and F4 - F2 that give U2, U3 [N] in the layout."""
-    k = mixer.pairs
-    return k[0] * u2 + k[1] * u3, k[2] * u2 + k[3] * u3
+    return mixer[PAIRS] * u2 + mixer[PAIRS + 1] * u3, mixer[PAIRS + 2] * u2 + mixer[PAIRS + 3] * u3
 
 
 @njit(cache=True, inline='always', error_model='numpy')
 def forces_from_controls(u1, u2, u3, u4, mixer):
     """Inverse of eq. (2): rotor thrusts (F1..F4) [N] that produce U1..U4 exactly (no limits)."""
     t13, t24 = pair_torques(u2, u3, mixer)
-    spin_yaw = mixer.spin * (u4 / mixer.yaw_coefficient)
+    spin_yaw = mixer[SPIN] * (u4 / mixer[YAW_COEFFICIENT])
     first_third = 0.5 * (u1 - spin_yaw)    # F1 + F3
     second_fourth = 0.5 * (u1 + spin_yaw)  # F2 + F4
     return (0.5 * (first_third - t13),
@@ -115,7 +109,7 @@ def priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
     """
     mean = 0.25 * clipped(u1, 4.0 * f_min, 4.0 * f_max)
     t13, t24 = pair_torques(u2, u3, mixer)
-    yaw = mixer.spin * (0.25 * u4 / mixer.yaw_coefficient)
+    yaw = mixer[SPIN] * (0.25 * u4 / mixer[YAW_COEFFICIENT])
     # the common case first: the demand fits (s = 1, the demanded yaw shift), computed as below
     demanded = (mean - 0.5 * t13 - yaw, mean - 0.5 * t24 + yaw, mean + 0.5 * t13 - yaw, mean + 0.5 * t24 + yaw)
     fits = ((np.minimum(np.minimum(demanded[0], demanded[1]), np.minimum(demanded[2], demanded[3])) >= f_min)

@@ -27,7 +27,9 @@ controllers' laws are unchanged. For "+" the coefficients are the paper's 0 and 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple, Sequence
+from typing import Sequence
+
+import numpy as np
 
 FRAMES = ('plus', 'x', 'custom')
 
@@ -43,21 +45,15 @@ STANDARD_DIRECTIONS = (1, -1, 1, -1)
 SYMMETRY_TOLERANCE = 1e-9
 
 
-class RotorMixer(NamedTuple):
-    """A layout as the mixer kernels read it (:mod:`quad_msgs_bridge.mixer`), for one vehicle.
-
-    Forward (eq. 2): U2 = sum roll_i T_i, U3 = sum pitch_i T_i, U4 = yaw_coefficient sum yaw_i T_i.
-    Inverse: the pair torques t13 = T3 - T1 and t24 = T4 - T2 are ``pairs`` (K11, K12, K21, K22) times
-    (U2, U3): t13 = K11 U2 + K12 U3, t24 = K21 U2 + K22 U3; ``spin`` is s_1 (the yaw shift of U4 moves
-    thrust from the pair (1, 3) to (2, 4) when s_1 = +1).
-    """
-
-    roll: tuple           #: [-] y_i / d of F1..F4
-    pitch: tuple          #: [-] -x_i / d of F1..F4
-    yaw: tuple            #: [-] -s_i of F1..F4
-    yaw_coefficient: float  #: [m] Kd / Kp
-    pairs: tuple          #: [-] (K11, K12, K21, K22)
-    spin: float           #: [-] s_1
+# A layout as the mixer kernels read it (:mod:`quad_msgs_bridge.mixer`): one float64 array of MIXER_SIZE
+# values per vehicle (an array, not a tuple: a compiled kernel is called with it at the cost of a float).
+# Forward (eq. 2): U2 = sum roll_i T_i, U3 = sum pitch_i T_i, U4 = Kd/Kp sum yaw_i T_i, with
+# roll_i = y_i / d, pitch_i = -x_i / d, yaw_i = -s_i [-] at ROLL, PITCH, YAW (F1..F4 each) and Kd/Kp [m]
+# at YAW_COEFFICIENT. Inverse: the pair torques t13 = T3 - T1 and t24 = T4 - T2 are (K11, K12, K21, K22)
+# at PAIRS times (U2, U3): t13 = K11 U2 + K12 U3, t24 = K21 U2 + K22 U3; SPIN holds s_1 (the yaw shift of
+# U4 moves thrust from the pair (1, 3) to (2, 4) when s_1 = +1).
+ROLL, PITCH, YAW, YAW_COEFFICIENT, PAIRS, SPIN = 0, 4, 8, 12, 13, 17
+MIXER_SIZE = 18
 
 
 def rotor_names(frame: str, positions: Sequence[Sequence[float]] | None = None) -> tuple[str, str, str, str]:
@@ -103,17 +99,19 @@ def layout_problem(positions: Sequence[Sequence[float]], directions: Sequence[in
     return None
 
 
-def rotor_mixer(positions: Sequence[Sequence[float]], directions: Sequence[int], d: float,
-                yaw_coefficient: float) -> RotorMixer:
-    """The kernels' :class:`RotorMixer` of a (checked) layout, arm length d [m] and Kd/Kp [m].
+def rotor_mixer(positions: Sequence[Sequence[float]], directions: Sequence[int], d, yaw_coefficient) -> np.ndarray:
+    """The kernels' mixer array (MIXER_SIZE values, see ROLL ... SPIN) of a (checked) layout, arm length
+    d [m] and Kd/Kp [m]; shape (B, MIXER_SIZE) when d or Kd/Kp are arrays of B vehicles (a batch).
 
     With X_i = x_i / d, Y_i = y_i / d and the pairs of the module docstring, U2 = -(Y1 t13 + Y2 t24) and
     U3 = X1 t13 + X2 t24 (from T1 - T3 = -t13, T2 - T4 = -t24); ``pairs`` is the inverse of that 2x2 map.
     """
-    roll = tuple(y / d for _, y, _ in positions)
-    pitch = tuple(-x / d for x, _, _ in positions)
+    d = np.asarray(d, dtype=float)
+    roll = [y / d for _, y, _ in positions]
+    pitch = [-x / d for x, _, _ in positions]
     (x1, y1), (x2, y2) = (positions[0][0] / d, positions[0][1] / d), (positions[1][0] / d, positions[1][1] / d)
     det = x1 * y2 - x2 * y1          # of [[-Y1, -Y2], [X1, X2]]
-    pairs = (x2 / det, y2 / det, -x1 / det, -y1 / det)
-    return RotorMixer(roll, pitch, tuple(-float(s) for s in directions), yaw_coefficient,
-                      tuple(p + 0.0 for p in pairs), float(directions[0]))
+    pairs = [x2 / det + 0.0, y2 / det + 0.0, -x1 / det + 0.0, -y1 / det + 0.0]   # + 0.0: no -0.0
+    values = [*roll, *pitch, *[-float(s) for s in directions], yaw_coefficient, *pairs, float(directions[0])]
+    mixer = np.stack(np.broadcast_arrays(*[np.asarray(v, dtype=float) for v in values]), axis=-1)
+    return mixer

@@ -23,8 +23,8 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 import yaml
 
-from quad_msgs_bridge.rotor_layout import (FRAMES, STANDARD_DIRECTIONS, RotorMixer, frame_positions, layout_problem,
-                                           rotor_mixer, rotor_names)
+from quad_msgs_bridge.rotor_layout import (FRAMES, STANDARD_DIRECTIONS, frame_positions, layout_problem, rotor_mixer,
+                                           rotor_names)
 
 DEFAULT_VEHICLE_FILE = Path(__file__).resolve().parent / 'config' / 'vehicle.yaml'
 #: the shipped vehicles of real quadrotors, by name (docs/VEHICLES.md); 'paper' is DEFAULT_VEHICLE_FILE
@@ -262,8 +262,9 @@ class VehicleParams:
         return rotor_names(self.frame, self.rotor_positions)
 
     @cached_property
-    def mixer(self) -> RotorMixer:
-        """This (single) vehicle's layout as the mixer kernels read it (:mod:`quad_msgs_bridge.mixer`)."""
+    def mixer(self) -> np.ndarray:
+        """The layout as the mixer kernels read it (:mod:`quad_msgs_bridge.rotor_layout`, ROLL ... SPIN):
+        MIXER_SIZE floats, or (B, MIXER_SIZE) for a batch (the model's constants take it row by row)."""
         return rotor_mixer(self.rotor_positions, self.rotor_directions, self.d, self.yaw_coefficient)
 
     @classmethod
