@@ -46,7 +46,8 @@ SYMMETRY_TOLERANCE = 1e-9
 
 
 # A layout as the mixer kernels read it (:mod:`quad_msgs_bridge.mixer`): one float64 array of MIXER_SIZE
-# values per vehicle (an array, not a tuple: a compiled kernel is called with it at the cost of a float).
+# values per vehicle (an array, not a tuple: numba dispatches a call with an array argument in under a
+# microsecond, with a named tuple of tuples in about five).
 # Forward (eq. 2): U2 = sum roll_i T_i, U3 = sum pitch_i T_i, U4 = Kd/Kp sum yaw_i T_i, with
 # roll_i = y_i / d, pitch_i = -x_i / d, yaw_i = -s_i [-] at ROLL, PITCH, YAW (F1..F4 each) and Kd/Kp [m]
 # at YAW_COEFFICIENT. Inverse: the pair torques t13 = T3 - T1 and t24 = T4 - T2 are (K11, K12, K21, K22)
