@@ -42,7 +42,8 @@ def test_inverse_round_trip(seed):
     forces = tuple(rng.uniform(-1.0, 4.0, 4))
     np.testing.assert_allclose(forces_from_controls(*controls_from_forces(*forces, MIXER), MIXER), forces, atol=1e-12)
     controls = (rng.uniform(0, 10), *rng.uniform(-2, 2, 2), rng.uniform(-0.05, 0.05))
-    np.testing.assert_allclose(controls_from_forces(*forces_from_controls(*controls, MIXER), MIXER), controls, atol=1e-12)
+    np.testing.assert_allclose(controls_from_forces(*forces_from_controls(*controls, MIXER), MIXER), controls,
+                               atol=1e-12)
 
 
 def test_hover_forces_give_weight_and_no_torque():

@@ -180,7 +180,7 @@ class VehicleParams:
     wind_drag: float = DEFAULT_WIND_DRAG                 #: [N s/m] drag against the air when wind is on
     frame: str = 'plus'                                  #: rotor layout: 'plus', 'x' or 'custom'
     rotor_positions: tuple | None = None                 #: [m, body FLU] (x, y, z) of F1..F4 (None: from frame, d)
-    rotor_directions: tuple | None = None                #: [-] +1 CCW / -1 CW seen from above, F1..F4 (None: +1, -1, +1, -1)
+    rotor_directions: tuple | None = None                #: [-] +1 CCW / -1 CW from above, F1..F4 (None: 1, -1, 1, -1)
 
     def __post_init__(self):
         """Check every value (element by element for a batch) and store floats, float arrays and tuples."""
@@ -215,7 +215,8 @@ class VehicleParams:
             if self.rotor_positions is None:
                 raise ParameterError('vehicle.rotor_positions: frame custom needs rotor_positions and rotor_directions')
             if self.rotor_directions is None:
-                raise ParameterError('vehicle.rotor_directions: frame custom needs rotor_positions and rotor_directions')
+                raise ParameterError('vehicle.rotor_directions: frame custom needs rotor_positions and '
+                                     'rotor_directions')
             positions = _rotor_positions(self.rotor_positions)
         else:
             arm = self.d

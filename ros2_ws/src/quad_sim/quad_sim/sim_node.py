@@ -33,8 +33,8 @@ from functools import partial
 import rclpy
 from rclpy.node import Node
 
-from quad_msgs_bridge.contract import (CLOCK, ODOM, ODOM_FRAME, ROBOT_DESCRIPTION, ROTOR_FORCES, TF, TF_STATIC, base_frame,
-                                      resolve, vehicle_namespaces)
+from quad_msgs_bridge.contract import (CLOCK, ODOM, ODOM_FRAME, ROBOT_DESCRIPTION, ROTOR_FORCES, TF, TF_STATIC,
+                                      base_frame, resolve, vehicle_namespaces)
 from quad_msgs_bridge.conversions import MessageKit
 from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder, tf_encoder
 from quad_msgs_bridge.ros_helpers import (declare, publication_log, publisher, run_node, subscription,
