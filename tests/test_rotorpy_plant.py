@@ -12,7 +12,7 @@ from quad_msgs_bridge.frames import body_rates_from_euler_rates
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.rotorpy_conversion import (HUMMINGBIRD, aero_coefficients, motor_thrust_commands, quad_params,
                                                  rotor_layout, rotorpy_state, state_from_rotorpy)
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file, shipped_vehicles
 
 needs_rotorpy = pytest.mark.skipif(importlib.util.find_spec('rotorpy') is None, reason='RotorPy is not installed '
                                    '(pip install rotorpy==3.0.0, in requirements-test.txt)')
@@ -50,32 +50,34 @@ def _rotorpy_wrench(quad: dict, thrusts) -> np.ndarray:
     return np.array([sum(thrusts), *moment])
 
 
-def test_the_plus_layout_gives_the_wrench_of_eq_2():
-    quad = quad_params(PARAMS, aero_coefficients(PARAMS), 0.005)
-    forces = (1.3, 1.1, 1.0, 1.25)
-    u1, u2, u3, u4 = controls_from_forces(*forces, PARAMS.yaw_coefficient)
-    np.testing.assert_allclose(_rotorpy_wrench(quad, forces), [u1, PARAMS.d * u2, PARAMS.d * u3, u4], atol=1e-15)
-    assert quad['k_eta'] * quad['rotor_speed_max'] ** 2 == pytest.approx(PARAMS.F_max)
+@pytest.mark.parametrize('name', sorted(shipped_vehicles()))
+def test_every_shipped_layout_gives_rotorpy_the_wrench_of_eq_2(name):
+    """RotorPy's rotor wrench of the converted vehicle equals our model's eq. (2) in the vehicle's layout ("+" for
+    the paper's, X for the others): roll d U2, pitch d U3, yaw U4."""
+    params = load_vehicle_file(name)[0]
+    quad = quad_params(params, aero_coefficients(params), 0.005)
+    forces = tuple(params.hover_force * k for k in (1.3, 1.1, 0.9, 1.25))
+    u1, u2, u3, u4 = controls_from_forces(*forces, params.mixer)
+    np.testing.assert_allclose(_rotorpy_wrench(quad, forces), [u1, params.d * u2, params.d * u3, u4],
+                               rtol=1e-12, atol=1e-15)
+    assert quad['k_eta'] * quad['rotor_speed_max'] ** 2 == pytest.approx(params.F_max)
     assert quad['tau_m'] == 0.005
+
+
+def test_the_plus_layout_is_the_papers():
+    positions, directions = rotor_layout(PARAMS)
+    d = PARAMS.d
+    np.testing.assert_allclose(positions, [(d, 0, 0), (0, -d, 0), (-d, 0, 0), (0, d, 0)], atol=1e-15)
+    np.testing.assert_array_equal(directions, [-1.0, 1.0, -1.0, 1.0])   # F2, F4 clockwise: reaction torque +z
 
 
 def test_a_centre_of_gravity_offset_moves_the_rotors_as_our_model_moves_the_moments():
     offset = replace(PARAMS, cog_offset=(0.01, -0.02, 0.0))
     quad = quad_params(offset, aero_coefficients(offset), 0.005)
     forces = (1.3, 1.1, 1.0, 1.25)
-    u1, u2, u3, u4 = controls_from_forces(*forces, PARAMS.yaw_coefficient)
+    u1, u2, u3, u4 = controls_from_forces(*forces, PARAMS.mixer)
     np.testing.assert_allclose(_rotorpy_wrench(quad, forces),
                                [u1, PARAMS.d * u2 + 0.02 * u1, PARAMS.d * u3 + 0.01 * u1, u4], atol=1e-15)
-
-
-def test_explicit_rotor_positions_and_directions_are_used_when_the_vehicle_has_them():
-    class XVehicle:
-        d, cog_offset = 0.1, (0.0, 0.0, 0.0)
-        rotor_positions = ((0.07, 0.07), (0.07, -0.07), (-0.07, -0.07), (-0.07, 0.07))
-        rotor_directions = (1, -1, 1, -1)      # +1 counter-clockwise seen from above
-    positions, signs = rotor_layout(XVehicle())
-    np.testing.assert_allclose(positions[1], [0.07, -0.07, 0.0])
-    np.testing.assert_array_equal(signs, [-1.0, 1.0, -1.0, 1.0])   # a counter-clockwise rotor turns the body clockwise
 
 
 def test_rotor_efficiency_and_limits_shape_the_thrust_commands():

@@ -38,10 +38,6 @@ from quad_msgs_bridge.frames import _body_rates, _euler, _euler_rates, _quaterni
 from quad_msgs_bridge.state import STATE_SIZE
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
 
-#: RotorPy's sign of each rotor's reaction torque about body +z for the paper's "+" layout (F1 front, F2 right,
-#: F3 back, F4 left): F2 and F4 turn clockwise seen from above (reaction torque +z), F1 and F3 counter-clockwise.
-PLUS_REACTION_SIGNS = (-1.0, 1.0, -1.0, 1.0)
-
 #: RotorPy's aerodynamic coefficients of its packaged "hummingbird" vehicle (rotorpy 3.0.0,
 #: ``rotorpy/vehicles/hummingbird_params.py``: an AscTec Hummingbird, 0.5 kg), from which
 #: :func:`aero_coefficients` scales a vehicle's own. Units as RotorPy states them.
@@ -80,27 +76,16 @@ def aero_coefficients(params: VehicleParams) -> dict:
 
 
 def rotor_layout(params: VehicleParams) -> tuple[np.ndarray, np.ndarray]:
-    """(positions (4, 3) [m, body FLU] of rotors F1..F4 about the *centre of gravity*, reaction-torque signs (4,)).
+    """(positions (4, 3) [m, body FLU] of rotors F1..F4 about the *centre of gravity*, RotorPy's rotor_directions (4,)).
 
-    A vehicle with explicit ``rotor_positions`` ((x, y) or (x, y, z) [m, body FLU] from the geometric centre)
-    and ``rotor_directions`` (+1: counter-clockwise seen from above, so a reaction torque about -z) uses them;
-    otherwise the paper's "+" layout: F1 (d, 0), F2 (0, -d), F3 (-d, 0), F4 (0, d), F2 and F4 clockwise.
-    RotorPy takes positions about the centre of mass, so a centre-of-gravity offset c is subtracted: that is
+    The vehicle's layout (:mod:`quad_msgs_bridge.rotor_layout`: ``rotor_positions`` from the geometric centre,
+    ``rotor_directions`` +1 counter-clockwise seen from above). RotorPy's rotor_directions is the sign of a
+    rotor's reaction torque about body +z, which turns the body against the rotor: a counter-clockwise rotor is
+    -1. RotorPy takes positions about the centre of mass, so a centre-of-gravity offset c is subtracted: that is
     how our model's extra moments (-c_y U1 roll, c_x U1 pitch) arise in RotorPy.
     """
-    positions = getattr(params, 'rotor_positions', None)
-    frame = getattr(params, 'frame', 'plus')
-    if positions is None and frame != 'plus':
-        raise ParameterError(f'plant rotorpy: a vehicle of frame {frame!r} needs its rotor_positions and '
-                             'rotor_directions (only the "+" layout is derived from d)')
-    if positions is None:
-        d = params.d
-        positions = ((d, 0.0, 0.0), (0.0, -d, 0.0), (-d, 0.0, 0.0), (0.0, d, 0.0))
-        signs = np.array(PLUS_REACTION_SIGNS)
-    else:
-        positions = [tuple(p) + (0.0,) * (3 - len(p)) for p in positions]
-        signs = -np.array(params.rotor_directions, dtype=float)
-    return np.array(positions, dtype=float) - np.array(params.cog_offset, dtype=float), signs
+    positions = np.array(params.rotor_positions, dtype=float) - np.array(params.cog_offset, dtype=float)
+    return positions, -np.array(params.rotor_directions, dtype=float)
 
 
 def check_representable(params: VehicleParams) -> None:
