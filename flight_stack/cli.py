@@ -212,6 +212,13 @@ class Flown:
     failure_time_s: float | None = None   #: [s] sim time at which it failed
 
 
+def planned_run(plan) -> dict[str, str]:
+    """The bag's custom data of what the run planned (its length [s] and --max-error [m]), from which a review
+    tells a flight that ended early or failed its checks (quad_msgs_bridge.review.verdict)."""
+    from quad_msgs_bridge.bag.flight_bag import DURATION_KEY, MAX_ERROR_KEY
+    return {DURATION_KEY: repr(float(plan.duration)), MAX_ERROR_KEY: repr(float(plan.max_error))}
+
+
 def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_view=None,
              speed_factor: float = 0.0, live_wait: bool = False) -> Flown:
     """The embedded backend; with ``bag``, the flight to review is the one in memory (what the bag holds)."""
@@ -227,7 +234,8 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
         with deferred():
             recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
                                           controller=plan.controller, scenario=plan.scenario, backend='embedded',
-                                          seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled))
+                                          seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled),
+                                          **planned_run(plan))
                          if bag else contextlib.nullcontext())
         with closed_whole(recording) as written:
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
@@ -259,7 +267,8 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
             recording = (FleetBag.create(bag, plan.params, plan.settle_time, [v.namespace for v in vehicles],
                                          topics=plan.topics, controller=plan.controller, scenario=plan.scenario,
                                          backend='embedded', seed=plan.seed,
-                                         disturbances=disturbances_label(plan.disturbances.enabled))
+                                         disturbances=disturbances_label(plan.disturbances.enabled),
+                                         **planned_run(plan))
                          if bag else contextlib.nullcontext())
         with closed_whole(recording) as written:
             results = fly_fleet(plan.controller, trajectories, plan.params, plan.disturbances, plan.gains,
@@ -293,7 +302,7 @@ def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str,
         control_rate=plan.control_rate, bag=bag,
         topics=[t.name for t in plan.topics], mode=args.mode, speed_factor=args.speed_factor,
         extra_odom_subscribers=args.extra_subscribers, vehicle_file=args.vehicle, gains_file=args.gains,
-        settle_time=plan.settle_time, quiet=args.quiet, record_by=args.record_by))
+        settle_time=plan.settle_time, quiet=args.quiet, record_by=args.record_by, max_error=plan.max_error))
     if result.failed_node:
         raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
                             + (f'; the bag is closed: {bag}' if bag_shown else ''),

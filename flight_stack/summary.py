@@ -7,6 +7,7 @@ from pathlib import Path
 
 from quad_msgs_bridge.review.metrics import FlightRecord, flight_metrics, has_fuzzy_term
 from quad_msgs_bridge.review.report import describe_share
+from quad_msgs_bridge.review.verdict import failures as flight_failures
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
@@ -31,11 +32,8 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
     sim_time = metrics['duration_s']
     if failure is not None and failure_time_s is None:
         failure_time_s = float(metrics['duration_s'] if isinstance(flight, dict) else flight.time[-1])
-    failures = [] if failure is None else [f'the flight ended early: {failure} at {failure_time_s:.3f} s']
-    if not metrics['all_finite']:
-        failures.append('non-finite state or rotor force')
-    if metrics['max_position_error_m'] > max_error:
-        failures.append(f'max position error {metrics["max_position_error_m"]:.3f} m exceeds --max-error {max_error:g} m')
+    failures = flight_failures(metrics, None if failure is None else f'{failure} at {failure_time_s:.3f} s',
+                               max_error)
     return {
         **metrics,
         'flight_ok': not failures,

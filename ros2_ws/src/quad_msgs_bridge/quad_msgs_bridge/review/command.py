@@ -22,6 +22,7 @@ from typing import Sequence
 from quad_msgs_bridge.review.flight_from_bag import BagFlight, fleet_namespaces, read_flight
 from quad_msgs_bridge.review.plots import plot_flights
 from quad_msgs_bridge.review.report import text_table, write_html, write_markdown
+from quad_msgs_bridge.review.verdict import failures, max_error_of, planned_duration
 
 PLOT_HINT = ('plots skipped: matplotlib is not installed (pip install matplotlib, '
              'or sudo apt install python3-matplotlib)')
@@ -62,18 +63,23 @@ def review_bags(bags: Sequence[str | Path], out_dir: str | Path, *, namespace: s
 
 
 def with_failure(metrics: dict, flight: BagFlight) -> dict:
-    """``metrics`` with the flight's ``failure`` (why it ended early, None if it did not, as far as its bag
-    records) and ``failure_time_s`` [s, sim time], as ``summary.json`` has them."""
-    failure = flight.failure
+    """``metrics`` with the flight's verdict as ``summary.json`` has it (quad_msgs_bridge.review.verdict):
+    ``failure`` (why a failure rule stopped it, None if none did, as far as its bag records) and
+    ``failure_time_s`` [s, sim time], ``ended_early`` (why and where it ended before its planned length,
+    None if it did not), ``planned_duration_s`` (None: not recorded), ``failures`` and ``flight_ok``."""
+    failure, custom = flight.failure, flight.custom_data
+    found = failures(metrics, flight.ending, max_error_of(custom))
     return {**metrics, 'failure': None if failure is None else failure[0],
-            'failure_time_s': None if failure is None else failure[1]}
+            'failure_time_s': None if failure is None else failure[1], 'ended_early': flight.ending,
+            'planned_duration_s': planned_duration(custom), 'failures': found, 'flight_ok': not found}
 
 
 def failure_note(label: str, metrics: dict) -> str:
-    """What the report says of a failed flight: why and when, and what its metrics cover."""
-    covered = ('NaN: it failed before the settling window ended' if math.isnan(metrics['rmse_position_m'])
-               else f'they cover the {metrics["duration_s"]:.3f} s it flew')
-    return f'{label} FAILED: {metrics["failure"]} at {metrics["failure_time_s"]:.3f} s; its metrics: {covered}'
+    """What the report says of a failed flight: why, and for one that ended early what its metrics cover."""
+    covered = ('' if metrics['ended_early'] is None
+               else '; its metrics: NaN, it ended before the settling window did' if math.isnan(metrics['rmse_position_m'])
+               else f'; its metrics cover the {metrics["duration_s"]:.3f} s it flew')
+    return f'{label} FAILED: {"; ".join(metrics["failures"])}{covered}'
 
 
 def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: bool = True) -> Review:
@@ -87,7 +93,7 @@ def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: 
         flight.label = label
     metrics = [with_failure(flight.metrics(), flight) for flight in flights]
     notes = [f'{f.label}: {warning}' for f in flights for warning in f.warnings]
-    notes += [failure_note(f.label, m) for f, m in zip(flights, metrics) if m['failure'] is not None]
+    notes += [failure_note(f.label, m) for f, m in zip(flights, metrics) if m['failures']]
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / 'review.json').write_text(json.dumps(
         [{'label': f.label, 'bag': str(f.path), **m} for f, m in zip(flights, metrics)], indent=2) + '\n')

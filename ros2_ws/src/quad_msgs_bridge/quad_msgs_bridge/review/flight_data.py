@@ -28,6 +28,7 @@ from quad_msgs_bridge.bag.flight_bag import recorded_failure
 from quad_msgs_bridge.mixer import CONTROL_NAMES
 from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, FlightRecord, StatisticsAccumulator,
                                              flight_metrics, has_fuzzy_term, metrics_from_statistics)
+from quad_msgs_bridge.review.verdict import ending
 from quad_msgs_bridge.state import PSI, STATE_NAMES, STATE_SIZE
 from quad_msgs_bridge.vehicle_params import VehicleParams
 
@@ -89,7 +90,9 @@ class Flight:
     path: Path | None = None          #: its bag, if it has one
     custom_data: dict = field(default_factory=dict)   #: the bag's custom data (controller, scenario, ...)
     warnings: list = field(default_factory=list)      #: what reading the bag found odd
-    ended_early: bool = False         #: the flight failed and ended there (see BagFlight.ended_early)
+    #: the flight ended before its planned length: it failed, was interrupted or its bag was cut short
+    #: (:attr:`ending` says why and where; see BagFlight.ended_early for what it does to the metrics)
+    ended_early: bool = False
     summary: dict | None = None       #: the run's summary (``summary.json``), for a flight just flown
     _sums: 'StepSums | None' = field(default=None, repr=False, compare=False)
 
@@ -97,6 +100,21 @@ class Flight:
     def failure(self) -> tuple[str, float] | None:
         """(why, when [s, sim time]) the flight failed, from its bag's custom data; None if none is recorded."""
         return recorded_failure(self.custom_data)
+
+    @property
+    def end_time(self) -> float:
+        """[s, sim time] of the last control step flown (also when rows were thinned out)."""
+        if self._sums is not None and self._sums.first_time is not None:
+            return float(self._sums.last_time)
+        return float(self.time[-1])
+
+    @property
+    def ending(self) -> str | None:
+        """Why and where the flight ended before its planned length ('interrupted at 31.000 s of 60 s',
+        'flipped over at 1.472 s'); None if it flew all of it, as far as its custom data says
+        (:func:`~quad_msgs_bridge.review.verdict.ending`)."""
+        period = (self.end_time - float(self.time[0])) / max(self.steps - 1, 1)
+        return ending(self.custom_data, self.end_time, period)
 
     @property
     def record(self) -> FlightRecord:
@@ -127,14 +145,16 @@ class Flight:
         return named
 
     def to_pandas(self):
-        """A pandas DataFrame of :meth:`columns`, one row per kept step. Needs pandas (not a dependency of
-        the stack: ``pip install pandas``)."""
+        """A pandas DataFrame of :meth:`columns` but ``time``, one row per kept step, indexed by sim time
+        (index ``time_s`` [s]). Needs pandas (not a dependency of the stack: ``pip install pandas``)."""
         try:
             import pandas
         except ImportError as error:
             raise ImportError('Flight.to_pandas needs pandas, which the flight stack does not install: '
                               'pip install pandas (or use Flight.columns(), numpy arrays)') from error
-        return pandas.DataFrame(self.columns())
+        columns = self.columns()
+        index = pandas.Index(columns.pop('time'), name='time_s')
+        return pandas.DataFrame(columns, index=index)
 
 
 class StepSums:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 from rosbags.highlevel import AnyReader, AnyReaderError
 
-from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, recorded_failure, vehicle_custom_data
+from quad_msgs_bridge.bag.flight_bag import recorded_failure, vehicle_custom_data
 from quad_msgs_bridge.bag.reader import BagReadError, check_bag_path, is_finalized, mcap_file, read_custom_data
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (ALL_TOPICS, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GROUND_TRUTH,
@@ -27,6 +27,7 @@ from quad_msgs_bridge.conversions import (controls_from_wrench, diagnostics_from
                           rotor_forces_from_msg)
 from quad_msgs_bridge.review.flight_data import Flight, FlightLog
 from quad_msgs_bridge.review.metrics import FlightRecord, default_settle_time, flight_metrics, has_fuzzy_term
+from quad_msgs_bridge.review.verdict import ending
 from quad_msgs_bridge.state import state_from_odometry
 from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
@@ -49,10 +50,17 @@ class BagFlight:
     settle_time: float            #: [s]
     custom_data: dict             #: the bag's custom data (controller, scenario, disturbances, ...)
     warnings: list = field(default_factory=list)
-    #: the flight failed and ended there (known for a flight just flown, and from a bag that records its
-    #: failure): if that was before two settled steps its tracking figures are NaN, as in its summary,
-    #: rather than a too-short flight refused
+    #: the flight ended before its planned length (it failed, known for a flight just flown and from a bag
+    #: that records its failure; or it was interrupted, or its bag cut short): if that was before two settled
+    #: steps its tracking figures are NaN, as in its summary, rather than a too-short flight refused
     ended_early: bool = False
+
+    @property
+    def ending(self) -> str | None:
+        """Why and where the flight ended before its planned length; None if it did not (see
+        :attr:`quad_msgs_bridge.review.flight_data.Flight.ending`)."""
+        time = self.record.time
+        return ending(self.custom_data, float(time[-1]), float(time[-1] - time[0]) / max(len(time) - 1, 1))
 
     @property
     def failure(self) -> tuple[str, float] | None:
@@ -217,5 +225,7 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
         raise BagReadError(f'{bag}: not readable as a bag: {error}') from error
     if not log.steps:
         raise BagReadError(f'{bag}: no complete control step')
-    return log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
-                      warnings=warnings, ended_early=FAILURE_KEY in custom)
+    flight = log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
+                        warnings=warnings)
+    flight.ended_early = flight.ending is not None
+    return flight
