@@ -52,6 +52,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     from nnit2fsmc_controller.factory import CONTROLLERS
     from nnit2fsmc_controller.trajectory import SCENARIOS
     from quad_msgs_bridge.contract import RECORDED_TOPICS
+    from quad_msgs_bridge.output_path import output_path
     from flight_stack.fleet import MAX_VEHICLES
 
     parser = argparse.ArgumentParser(description=__doc__,
@@ -64,7 +65,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--disturbances', action=argparse.BooleanOptionalAction, default=None,
                         help='paper section IV disturbances (default: as in the vehicle file, on)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the NN initial weights, 0 to 2^31 - 1')
-    parser.add_argument('--out', type=Path, default=None,
+    parser.add_argument('--out', type=output_path, default=None,
                         help='output folder (default out/<scenario>-<controller>); see above for what a run leaves')
     parser.add_argument('--overwrite', action='store_true',
                         help='replace an earlier run in --out (its summary, bag, report, plots; other files stay) '
@@ -84,19 +85,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help='fly N vehicles (at most %d) on one sim clock, uav1..uavN, each its own copy of the scenario '
                              'shifted 3 m along y from the previous one (ROS: one simulator, a controller and a '
                              'trajectory node per vehicle; embedded: the fleet stepped as one batch)' % MAX_VEHICLES)
-    parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
-                        help='ROS backend: lockstep (deterministic) or realtime simulation')
+    parser.add_argument('--mode', choices=('lockstep', 'realtime'), default=None,
+                        help='ROS backend: lockstep (deterministic, the default) or realtime simulation')
     parser.add_argument('--speed-factor', type=float, default=None,
                         help='sim s per wall s (default 1: real time) of the ROS backend\'s realtime mode and of '
                              'the --live view; with --live 0 flies as fast as it can')
     parser.add_argument('--extra-subscribers', type=int, default=0, metavar='N',
                         help='ROS backend: the simulator also waits for N more odom subscribers before it starts '
                              '(your own `ros2 bag record`, RViz), so they miss nothing of a lockstep flight')
-    parser.add_argument('--record-by', choices=('recorder', 'publishers'), default='publishers',
+    parser.add_argument('--record-by', choices=('recorder', 'publishers'), default=None,
                         help='ROS backend: who writes the bag: each node logging what it publishes, merged into '
                              'the bag after the flight (the default), or the record node (one more DDS reader of '
                              'every topic: a lockstep step about 35 %% slower; docs/BAGS.md)')
-    parser.add_argument('--bag', type=Path, default=None,
+    parser.add_argument('--bag', type=output_path, default=None,
                         help='record the flight into this rosbag2 (MCAP) folder (default OUT/bag); '
                              'then review it into OUT (report.html, plots/)')
     parser.add_argument('--no-bag', action='store_true', help='record no bag (and write no report)')
@@ -129,6 +130,36 @@ def choose_backend(requested: str, live: bool) -> str:
     return 'ros'
 
 
+def check_count(option: str, value: int, low: int, high: int) -> int:
+    """``value`` if it is a whole number in [low, high], else a ParameterError naming ``option`` and the range."""
+    from quad_msgs_bridge.vehicle_params import ParameterError
+    if not low <= value <= high:
+        raise ParameterError(f'{option}: {value} is outside the valid range {low} to {high} (a whole number)')
+    return value
+
+
+def check_backend_options(args, backend: str) -> None:
+    """The ROS backend can be started (rclpy imports), and no option of the other backend is given: each
+    refused with a ParameterError naming it, before anything starts. Sets the ROS options' defaults."""
+    from quad_msgs_bridge.vehicle_params import ParameterError
+    if backend == 'ros':
+        try:
+            import rclpy  # noqa: F401
+        except ImportError as error:
+            raise ParameterError(f'--backend ros: rclpy cannot be imported ({error}); source '
+                                 '/opt/ros/jazzy/setup.bash first, or fly with --backend embedded') from None
+        args.mode = args.mode or 'lockstep'
+        args.record_by = args.record_by or 'publishers'
+        return
+    ros_only = [(option, value) for option, value in (('--mode', args.mode), ('--record-by', args.record_by),
+                                                      ('--extra-subscribers', args.extra_subscribers or None))
+                if value is not None]
+    if ros_only:
+        option, value = ros_only[0]
+        raise ParameterError(f'{option} {value}: an option of the ROS backend, which the embedded backend would '
+                             'ignore; fly with --backend ros, or leave it out')
+
+
 def check_live_options(args, backend: str) -> float:
     """The speed factor of an embedded flight (0: as fast as it can), after checking the live-view options."""
     from quad_msgs_bridge.vehicle_params import ParameterError, check_number
@@ -145,7 +176,7 @@ def check_live_options(args, backend: str) -> float:
             raise ParameterError('--speed-factor: the embedded flight is paced only with --live (without it, it '
                                  'flies as fast as it can)')
         return 0.0
-    check_number('--live-port', args.live_port, 0, 65535)
+    check_count('--live-port', args.live_port, 0, 65535)
     return check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor, 0.0, 1000.0)
 
 
@@ -220,10 +251,12 @@ def planned_run(plan) -> dict[str, str]:
 
 
 def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_view=None,
-             speed_factor: float = 0.0, live_wait: bool = False) -> Flown:
-    """The embedded backend; with ``bag``, the flight to review is the one in memory (what the bag holds)."""
+             speed_factor: float = 0.0, live_wait: bool = False, namespace: str | None = None) -> Flown:
+    """The embedded backend; with ``bag`` (its topics under ``namespace``, None: the default one), the flight to
+    review is the one in memory (what the bag holds)."""
     from flight_stack.closed_loop import FailureRules
     from flight_stack.embedded import fly_embedded
+    from flight_stack.fleet import fleet_layout
     from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
 
     with stop_signals(), live_view.server if live_view else contextlib.nullcontext():
@@ -235,7 +268,7 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
             recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
                                           controller=plan.controller, scenario=plan.scenario, backend='embedded',
                                           seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled),
-                                          **planned_run(plan))
+                                          namespace=fleet_layout(1, namespace)[0].namespace, **planned_run(plan))
                          if bag else contextlib.nullcontext())
         with closed_whole(recording) as written:
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
@@ -396,9 +429,10 @@ def run(argv: list[str]) -> int:
                            seed=args.seed, vehicle_file=args.vehicle, gains_file=args.gains,
                            physics_rate=args.physics_rate, settle_time=args.settle_time, max_error=args.max_error,
                            topics=args.topics)
-        check_number('--extra-subscribers', args.extra_subscribers, 0.0, 100.0)
-        check_number('--vehicles', args.vehicles, 1, MAX_VEHICLES)
+        check_count('--extra-subscribers', args.extra_subscribers, 0, 100)
+        check_count('--vehicles', args.vehicles, 1, MAX_VEHICLES)
         backend = choose_backend(args.backend, args.live)
+        check_backend_options(args, backend)
         if args.live and args.vehicles > 1:
             raise ParameterError('--live: the live view shows one vehicle; fly a fleet without --live')
         speed_factor = check_live_options(args, backend)
@@ -459,8 +493,9 @@ def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = Fa
     from flight_stack.summary import write_summary
     from quad_msgs_bridge.vehicle_params import ParameterError
     plan = plan_flight(controller, scenario, vehicle_file=vehicle, gains_file=gains, **settings)
-    if out is not None and not isinstance(out, (str, Path)):
-        raise ParameterError(f'out: expected a folder path, got {out!r}')
+    if out is not None and (not isinstance(out, (str, Path)) or not str(out).strip()):
+        raise ParameterError(f'out: expected a folder path (None: write nothing; \'.\': the current folder), got '
+                             f'{out!r}')
     if out is None:
         flown = fly_here(plan, None, None)
         flown.data.summary = summarize(flown, plan, 'embedded')
@@ -495,7 +530,7 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
             flights = fly_fleet_here(args, plan, output.bag, bag_shown)
         else:
             flights = [(None, fly_here(plan, output.bag, bag_shown, not args.quiet, live_view, speed_factor,
-                                       args.live_wait))]
+                                       args.live_wait, args.namespace))]
     except KeyboardInterrupt:
         return unfinished(output, 'interrupted' + (f'; bag closed: {output.bag}' if output.bag else ''), 130)
     except FlightStopped as stopped:

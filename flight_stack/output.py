@@ -85,6 +85,8 @@ class _Target:
 
     def create_staging(self, option: str) -> None:
         parent = self.final.parent
+        if self.entries is not None and self.final.is_dir() and self.final.stat().st_dev != parent.stat().st_dev:
+            parent = self.final      # a mount point: stage on its own file system, so commit can move the entries
         try:
             parent.mkdir(parents=True, exist_ok=True)
             self.staging = _new_folder(parent, self.final.name + STAGING_MARK)
@@ -146,8 +148,10 @@ class RunOutput:
             raise ParameterError(f'--out: {out} exists and is not a folder')
         earlier = [name for name in self._out.entries if (out / name).exists()] if out.is_dir() else []
         if earlier and not overwrite:
-            raise ParameterError(f'--out: {out} holds an earlier run ({", ".join(earlier)}); pass --overwrite to '
-                                 'replace it, or choose another --out')
+            raise ParameterError(f'--out: {out} holds an earlier run ({", ".join(earlier)}); pass '
+                                 '--overwrite to replace it, or choose another --out')
+        if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
+            raise ParameterError(f'--out: cannot write into {out} (permission denied, or a read-only file system)')
         _check_writable_parent('--out', out)
 
     def _check_separate_bag(self, overwrite: bool) -> None:
