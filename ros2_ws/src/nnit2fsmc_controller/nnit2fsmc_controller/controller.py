@@ -122,11 +122,13 @@ def check_inputs(t: float, state: Sequence, reference: ReferenceSample, batch: i
                                  f'{"a number" if np.ndim(value) == 0 else f"an array of shape {np.shape(value)}"} '
                                  'among them')
         xp = BATCH
-    for name in ('position', 'velocity', 'acceleration', 'jerk', 'snap'):
-        vector = getattr(reference, name)
-        if isinstance(vector, (str, bytes)) or not hasattr(vector, '__len__') or len(vector) != 3:
-            raise ValueError(f'reference.{name}: expected 3 values [{REFERENCE_UNITS[name]}, world ENU], '
-                             f'got {vector!r}')
+    try:
+        sized = (len(reference.position) == len(reference.velocity) == len(reference.acceleration)
+                 == len(reference.jerk) == len(reference.snap) == 3)
+    except TypeError:
+        sized = False
+    if not sized:
+        raise ValueError(_not_a_vector(reference))
     values = (*state, *reference.position, *reference.velocity, *reference.acceleration,
               reference.yaw, reference.yaw_rate, reference.yaw_acceleration, *reference.jerk, *reference.snap)
     try:
@@ -136,6 +138,15 @@ def check_inputs(t: float, state: Sequence, reference: ReferenceSample, batch: i
     if not finite:
         raise ValueError(f'non-finite state or reference at t={t}')
     return xp
+
+
+def _not_a_vector(reference: ReferenceSample) -> str:
+    """What names the first vector field of ``reference`` that is not 3 values."""
+    for name in ('position', 'velocity', 'acceleration', 'jerk', 'snap'):
+        vector = getattr(reference, name)
+        if not hasattr(vector, '__len__') or len(vector) != 3:
+            return f'reference.{name}: expected 3 values [{REFERENCE_UNITS[name]}, world ENU], got {vector!r}'
+    return 'reference: a vector field is not 3 values'
 
 
 def _not_a_number(state: Sequence, reference: ReferenceSample) -> str:
