@@ -453,6 +453,10 @@ def run(argv: list[str]) -> int:
     except ParameterError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
+    if output.leftovers:
+        print(f'note: earlier runs into {output.out_dir} that did not finish left '
+              + ', '.join(str(folder) for folder in output.leftovers)
+              + ' (a bag there can be reviewed or recovered; remove them when no longer needed)', file=sys.stderr)
     print(f'flying {plan.controller} on "{plan.scenario}" for {plan.duration:g} s '
           f'(disturbances {"on" if plan.disturbances.enabled else "off"}), {backend} backend'
           + (f', {args.vehicles} vehicles' if args.vehicles > 1 else ''))

@@ -15,7 +15,9 @@ A bag given outside ``OUT`` (``--bag``) is a second target, staged and committed
 Two runs into one ``OUT`` at once: :meth:`RunOutput.create` takes an exclusive lock on
 ``.OUT_NAME.lock`` beside ``OUT`` (see :mod:`flight_stack.locking`) and holds it until the run is
 committed or kept as partial, so the second run is refused by name (ParameterError) before it
-flies, and never replaces the first one's result.
+flies, and never replaces the first one's result. Holding that lock, a run knows that every other
+``OUT.incomplete-*`` folder is a leftover of a run that ended: it removes the empty ones and names
+the others (:attr:`RunOutput.leftovers`), which the command prints.
 """
 from __future__ import annotations
 
@@ -137,6 +139,7 @@ class RunOutput:
         self._out = _Target(self.out_dir, entries)
         self._overwrite = overwrite
         self._lock: FileLock | None = None
+        self.leftovers: list[Path] = []      #: earlier unfinished runs' staging folders with content (create())
         self._check_out(overwrite)
         if self.bag_path is not None and self._bag_entry is None:
             self._check_separate_bag(overwrite)
@@ -190,15 +193,31 @@ class RunOutput:
 
     def create(self) -> None:
         """Lock ``out_dir`` and make the staging folders (raises ParameterError if another run is writing
-        it, or it cannot be written)."""
+        it, or it cannot be written); :attr:`leftovers` lists what earlier unfinished runs left."""
         try:
             self._lock_out()
+            self.leftovers = self._clear_leftovers()
             self._out.create_staging('--out')
             if self._bag is not None:
                 self._bag.create_staging('--bag')
         except ParameterError:
             self.discard()
             raise
+
+    def _clear_leftovers(self) -> list[Path]:
+        """The staging folders of earlier runs of ``out_dir`` that did not finish (with the lock held, no
+        other run is writing it, so their processes are gone): the empty ones are removed, the others (an
+        interrupted flight's bag, say) returned, oldest first."""
+        final = self._out.final
+        found = sorted((folder for folder in final.parent.glob(f'{final.name}{STAGING_MARK}*') if folder.is_dir()),
+                       key=lambda folder: folder.stat().st_mtime)
+        kept = []
+        for folder in found:
+            try:
+                folder.rmdir()
+            except OSError:
+                kept.append(folder)
+        return kept
 
     @property
     def out(self) -> Path:

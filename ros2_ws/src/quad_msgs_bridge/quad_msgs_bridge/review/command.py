@@ -19,11 +19,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
+from quad_msgs_bridge.output_path import output_path
 from quad_msgs_bridge.review.flight_from_bag import BagFlight, fleet_namespaces, read_flight
 from quad_msgs_bridge.review.plots import plot_flights
 from quad_msgs_bridge.review.report import text_table, write_html, write_markdown
 from quad_msgs_bridge.review.verdict import failures, max_error_of, planned_duration
 
+#: what a review writes into its output folder
+REVIEW_FILES = ('review.json', 'report.md', 'report.html', 'plots')
 PLOT_HINT = ('plots skipped: matplotlib is not installed (pip install matplotlib, '
              'or sudo apt install python3-matplotlib)')
 
@@ -108,13 +111,33 @@ def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: 
     return Review(list(flights), metrics, out_dir, report, plot_paths, notes)
 
 
+def clear_earlier_review(out_dir: Path, overwrite: bool) -> None:
+    """Make room for a review in ``out_dir``: ValueError if it holds an earlier review or run and not
+    ``overwrite``; with it, the earlier review's plots go (so none of them is taken for the new review's)."""
+    earlier = [name for name in (*REVIEW_FILES, 'summary.json') if (out_dir / name).exists()]
+    if not earlier:
+        return
+    if not overwrite:
+        raise ValueError(f'--out: {out_dir} holds an earlier review or run ({", ".join(earlier)}); pass --overwrite '
+                         'to replace its review, or choose another --out')
+    plots = out_dir / 'plots'
+    if plots.is_dir():
+        for plot in plots.glob('*.png'):
+            plot.unlink()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='review', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('bag', type=Path, help='bag directory (rosbag2, MCAP or sqlite3) or .mcap file')
     parser.add_argument('--compare', type=Path, nargs='+', default=[], metavar='BAG',
                         help='more bags to overlay and tabulate next to the first')
-    parser.add_argument('--out', type=Path, default=None, help='output folder (default: BAG-review next to BAG)')
+    parser.add_argument('--out', type=output_path, default=None,
+                        help='output folder (default: BAG-review next to BAG); one that holds an earlier review or '
+                             'run is refused without --overwrite')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='replace the earlier review in --out (its review.json, report.md, report.html and '
+                             'plots/; a run\'s summary.json and bag stay)')
     parser.add_argument('--vehicle', type=Path, default=None,
                         help='vehicle YAML for bags without vehicle parameters (default: the packaged one)')
     parser.add_argument('--settle-time', type=float, default=None,
@@ -125,6 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out_dir = args.out or args.bag.parent / f'{args.bag.name}-review'
     try:
+        clear_earlier_review(out_dir, args.overwrite)
         result = review_bags([args.bag, *args.compare], out_dir, namespace=args.namespace,
                              vehicle_file=args.vehicle, settle_time=args.settle_time, plots=not args.no_plots)
     except (ValueError, OSError) as error:   # ValueError (BagReadError, ParameterError, too short): wrong input
