@@ -16,7 +16,7 @@ Examples:
   python3 run_stack.py --controller smc-sign --out out/sign   # same disturbances, to compare
   python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
-Subcommands (each has its own --help): campaign, and the bag tools review, recover, rosbag2-qos (below).
+Subcommands (each has its own --help): campaign, and the bag tools review, recover, export, rosbag2-qos (below).
   python3 run_stack.py campaign SPEC.yaml --out DIR      # a robustness campaign (docs/CAMPAIGNS.md);
                                                          #   the shipped specs: run_stack.py campaign --list
 
@@ -27,6 +27,7 @@ control rate; --speed-factor at most 1000; --extra-subscribers at most 100; --du
 Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
   python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
   python3 run_stack.py recover BAG                       # finalize the bag of a killed recording
+  python3 run_stack.py export BAG --format csv --out flight.csv  # one row per step, columns with units
   python3 run_stack.py rosbag2-qos --namespace quad > qos.yaml   # for your own `ros2 bag record
                                                          #   --qos-profile-overrides-path qos.yaml`
 """
@@ -417,6 +418,9 @@ def run(argv: list[str]) -> int:
     if argv[:1] == ['campaign']:
         from flight_stack.campaign.cli import main as campaign_main
         return campaign_main(argv[1:])
+    if argv[:1] == ['export']:
+        from flight_stack.export import main as export_main
+        return export_main(argv[1:])
     args = parse_args(argv)
     if not args.quiet:
         print('planning the flight', flush=True)

@@ -25,7 +25,7 @@ from typing import Sequence
 import numpy as np
 
 from quad_msgs_bridge.bag.flight_bag import recorded_failure
-from quad_msgs_bridge.mixer import CONTROL_NAMES
+from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, FlightRecord, StatisticsAccumulator,
                                              flight_metrics, has_fuzzy_term, metrics_from_statistics)
 from quad_msgs_bridge.review.verdict import ending
@@ -49,6 +49,9 @@ SERIES = {
 STATE_UNITS = ('m', 'm', 'm', 'm/s', 'm/s', 'm/s', 'rad', 'rad', 'rad', 'rad/s', 'rad/s', 'rad/s')
 #: the sliding surfaces' units: of a velocity error (x, y, z) or an angular rate error (phi, theta, psi)
 SURFACE_UNITS = ('m/s', 'm/s', 'm/s', 'rad/s', 'rad/s', 'rad/s')
+#: the units of each subsystem's virtual control, and so of its NN (equivalent) and fuzzy (corrective) terms:
+#: commanded accelerations (x, y), U1 (z), U2, U3 (phi, theta) and U4 (psi)
+VIRTUAL_CONTROL_UNITS = ('m/s^2', 'm/s^2', 'N', 'N', 'N', 'N m')
 _WIDTH = sum(columns for columns, _ in SERIES.values())
 _SLICES, _start = {}, 0
 for _name, (_columns, _) in SERIES.items():
@@ -143,6 +146,15 @@ class Flight:
         for prefix, values in (('S', self.surfaces), ('nn', self.equivalent), ('fuzzy', self.corrective)):
             named.update(zip((f'{prefix}_{axis}' for axis in SUBSYSTEMS), values.T))
         return named
+
+    def column_units(self) -> dict[str, str]:
+        """The unit of each of :meth:`columns` ('s', 'm', 'm/s', 'rad', 'rad/s', 'N', 'N m', 'm/s^2')."""
+        units = {'time': 's', **dict(zip(STATE_NAMES, STATE_UNITS)), 'x_ref': 'm', 'y_ref': 'm', 'z_ref': 'm',
+                 'yaw_ref': 'rad', **{f'F{k}': 'N' for k in range(1, 5)}, **dict(zip(CONTROL_NAMES, CONTROL_UNITS))}
+        units.update((f'S_{axis}', unit) for axis, unit in zip(SUBSYSTEMS, SURFACE_UNITS))
+        for prefix in ('nn', 'fuzzy'):
+            units.update((f'{prefix}_{axis}', unit) for axis, unit in zip(SUBSYSTEMS, VIRTUAL_CONTROL_UNITS))
+        return units
 
     def to_pandas(self):
         """A pandas DataFrame of :meth:`columns` but ``time``, one row per kept step, indexed by sim time
