@@ -339,7 +339,7 @@ def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str,
         settle_time=plan.settle_time, quiet=args.quiet, record_by=args.record_by, max_error=plan.max_error))
     if result.failed_node:
         raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
-                            + (f'; the bag is closed: {bag}' if bag_shown else ''),
+                            + (f'; the bag is closed: {bag}' if bag_shown and bag.exists() else ''),
                             130 if result.failed_node == 'interrupted' else 1)
     flights = []
     for vehicle in vehicles:
@@ -436,10 +436,10 @@ def run(argv: list[str]) -> int:
         check_count('--extra-subscribers', args.extra_subscribers, 0, 100)
         check_count('--vehicles', args.vehicles, 1, MAX_VEHICLES)
         backend = choose_backend(args.backend, args.live)
-        check_backend_options(args, backend)
         if args.live and args.vehicles > 1:
             raise ParameterError('--live: the live view shows one vehicle; fly a fleet without --live')
         speed_factor = check_live_options(args, backend)
+        check_backend_options(args, backend)
         if backend == 'ros':
             args.speed_factor = check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor,
                                              0.0, low_inclusive=False)
@@ -486,7 +486,7 @@ def summarize(flown: Flown, plan, backend: str) -> dict:
                             seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
                             disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
                             wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure,
-                            failure_time_s=flown.failure_time_s)
+                            failure_time_s=flown.failure_time_s, planned_duration_s=plan.duration)
     summary.update(flown.extra)
     return summary
 

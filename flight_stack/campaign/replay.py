@@ -56,7 +56,7 @@ def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOp
                                 disturbances=setup.disturbances, gains=setup.gains,
                                 physics_rate=1.0 / setup.physics_dt, wall_time_s=result.wall_time_s,
                                 max_error=spec.max_error_m, failure=result.failure,
-                                failure_time_s=result.failure_time_s)
+                                failure_time_s=result.failure_time_s, planned_duration_s=spec.duration)
         summary['campaign'] = {'seed': spec.seed, 'flight': flight, 'sampled': conditions.sampled_values(setup.nominal)}
         write_summary(summary, target)
         # reviewed from the record in memory (what the bag holds), as a single flight is: it knows whether

@@ -80,8 +80,9 @@ def with_failure(metrics: dict, flight: BagFlight) -> dict:
 def failure_note(label: str, metrics: dict) -> str:
     """What the report says of a failed flight: why, and for one that ended early what its metrics cover."""
     covered = ('' if metrics['ended_early'] is None
-               else '; its metrics: NaN, it ended before the settling window did' if math.isnan(metrics['rmse_position_m'])
-               else f'; its metrics cover the {metrics["duration_s"]:.3f} s it flew')
+               else '; its metrics: NaN: it failed before the settling window ended'
+               if math.isnan(metrics['rmse_position_m'])
+               else f'; its metrics: they cover the {metrics["duration_s"]:.3f} s it flew')
     return f'{label} FAILED: {"; ".join(metrics["failures"])}{covered}'
 
 
