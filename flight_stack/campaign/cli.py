@@ -62,7 +62,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
 
 def main(argv: list[str]) -> int:
     args = parse_args(argv)
-    from .runner import RunOptions, run_campaign
+    from .runner import RunOptions, check_output, run_campaign
     from .spec import load_spec, shipped_specs
     if args.list:
         for path in shipped_specs():
@@ -82,6 +82,7 @@ def main(argv: list[str]) -> int:
         if args.replay is not None:
             from .replay import replay_flight
             return replay_flight(spec, out_dir, args.replay, options)
+        check_output(spec, out_dir, args.resume)
         print(f'campaign: {len(spec.controllers)} controller(s) x {spec.flights} flights of "{spec.scenario}", '
               f'{spec.duration:g} s each, seed {spec.seed} -> {out_dir}', file=sys.stderr)
         outcome = run_campaign(spec, out_dir, options)
