@@ -59,7 +59,8 @@ def make_controller(kind: str = 'nnit2fsmc', vehicle: VehicleParams | str | Path
 
 def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
         disturbances: bool | None = None, seed: int = 0, vehicle: VehicleParams | str | Path | None = None,
-        gains: Mapping[str, Any] | str | Path | None = None, physics_rate: float = 1000.0, settle_time: float | None = None,
+        gains: Mapping[str, Any] | str | Path | None = None, physics_rate: float = 1000.0,
+        settle_time: float | None = None,
         max_error: float = 1.0, out: str | Path | None = None, overwrite: bool = False,
         true_vehicle: VehicleParams | str | Path | None = None, wind: Mapping | None = None,
         sensor_noise: Mapping | None = None, delay_s: float = 0.0, motor_time_constant_s: float = 0.0,

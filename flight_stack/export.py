@@ -89,7 +89,8 @@ def export_flight(bag: str | Path, out: str | Path, file_format: str | None = No
     if file_format not in FORMATS:
         raise ParameterError(f'--format: {file_format!r} is not one of {", ".join(FORMATS)}')
     if out.is_dir():
-        raise ParameterError(f'--out: {out} is a folder; give the file to write (e.g. {out / ("flight." + file_format)})')
+        raise ParameterError(f'--out: {out} is a folder; give the file to write '
+                             f'(e.g. {out / ("flight." + file_format)})')
     if out.exists() and not overwrite:
         raise ParameterError(f'--out: {out} exists; pass --overwrite to replace it, or choose another --out')
     if not out.parent.is_dir():

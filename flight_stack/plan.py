@@ -154,7 +154,8 @@ def check_settle_time(settle_time: float | None, duration: float, control_rate: 
 
 def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
                 disturbances: bool | None = None, seed: int = 0, vehicle_file: Path | VehicleParams | None = None,
-                gains_file: Path | Mapping | None = None, physics_rate: float = 1000.0, settle_time: float | None = None,
+                gains_file: Path | Mapping | None = None, physics_rate: float = 1000.0,
+                settle_time: float | None = None,
                 max_error: float = 1.0, topics: Sequence[str] | None = None, **world) -> FlightPlan:
     """Every setting of a flight, checked; raises ParameterError (see the module doc).
 

@@ -81,8 +81,8 @@ def test_a_failed_flights_report_says_why_and_when_and_what_was_flown(tmp_path):
     report = (tmp_path / 'report.md').read_text()
     assert 'result: FAILED: the flight ended early: flipped over at 1.472 s' in report
     assert '| result | FAILED: the flight ended early: flipped over at 1.472 s |' in report
-    assert 'nnit2fsmc FAILED: the flight ended early: flipped over at 1.472 s; its metrics: NaN: it failed before the settling window ended' \
-        in report
+    assert ('nnit2fsmc FAILED: the flight ended early: flipped over at 1.472 s; its metrics: NaN: it failed before '
+            'the settling window ended') in report
     assert 'disturbances (paper section IV): enabled' in report and 'NN seed: 7' in report
     assert 'not recorded' not in report
     assert 'FAILED: the flight ended early: flipped over at 1.472 s' in (tmp_path / 'report.html').read_text()
