@@ -74,10 +74,9 @@ def test_l1_on_the_ground_estimates_nothing():
 
 def indi_gains(**indi):
     """The gains with every indi feedback gain 0 (alpha_d = 0 at a level hover reference) and ``indi`` keys set."""
-    gains = copy.deepcopy(GAINS)
+    gains = indi_gains_with(**indi)
     for axis in gains['indi']['axes'].values():
         axis.update(k_error=0.0, k_rate=0.0)
-    gains['indi'].update(indi)
     return gains
 
 
@@ -117,12 +116,24 @@ def test_indi_rejects_a_moment_step_as_its_filter_predicts():
         assert abs(fraction[steps]) <= 0.05 + 0.01 and abs(fraction[steps - 2]) > 0.05
 
 
+#: the LMS step of the effectiveness test: 4 times the packaged one, which is kept small so that campaign sensor
+#: noise does not drive the estimate (docs/ADAPTIVE_BASELINES.md); the law is the same
+ADAPTATION_RATE = 0.2
+
+
+def indi_gains_with(**indi):
+    """The packaged gains with the ``indi`` keys given."""
+    gains = copy.deepcopy(GAINS)
+    gains['indi'].update(indi)
+    return gains
+
+
 def fly_indi_and_read_effectiveness(thrust_factor: float, duration: float = 4.0):
     """The effectiveness estimate after ``duration`` [s] of the paper helix flown by indi on a vehicle whose
     rotors give ``thrust_factor`` times the thrust the nominal model expects (Kp off)."""
     true = dataclasses.replace(VEHICLE, rotor_thrust_factors=(thrust_factor,) * 4)
     trajectory = make_scenario('paper', duration)
-    controller = build_controller('indi', VEHICLE, GAINS)
+    controller = build_controller('indi', VEHICLE, indi_gains_with(effectiveness_rate=ADAPTATION_RATE))
     simulator = Simulator(QuadrotorModel(true, DISTURBANCES), DT, trajectory.initial_state)
     loop = ClosedLoop(controller, simulator, setpoint_path(published_path(trajectory, 50.0)).sample, 1,
                       FailureRules(settle_time=duration, max_error=1.0), measurement=build_measurement_stage(GAINS))
@@ -140,7 +151,8 @@ def test_indi_effectiveness_converges_on_a_vehicle_whose_rotor_coefficient_is_of
     nominal = fly_indi_and_read_effectiveness(1.0)
     weak = fly_indi_and_read_effectiveness(0.8)
     assert np.all(np.abs(nominal - 1.0) < 0.08)
-    np.testing.assert_allclose(weak[:2] / nominal[:2], 0.8, atol=0.03)
+    np.testing.assert_allclose(weak[:2] / nominal[:2], 0.8, atol=0.05)
+    assert np.all(np.abs(weak[:2] - 0.8) < 0.05)
     assert abs(weak[2] / nominal[2] - 1.0) < 0.06
 
 

@@ -290,7 +290,7 @@ def test_se3_is_lee_leok_mcclamroch_away_from_equilibrium():
     assert abs(reference.rates).min() > 0.1    # the desired-rate feed-forward was exercised
 
 
-@pytest.mark.parametrize('height, limit_key', [(1.5, 'max_tilt'), (0.0, 'low_altitude_max_tilt')])
+@pytest.mark.parametrize('height, limit_key', [(1.5, 'max_tilt'), (0.1, 'low_altitude_max_tilt')])   # above take-off
 def test_se3_tilt_limit_keeps_the_direction_of_the_horizontal_force(height, limit_key):
     controller = build_controller('se3', VEHICLE, GAINS)
     far = ReferenceSample((4.0, -3.0, height), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
@@ -343,7 +343,7 @@ def moderate_inputs(rng, count):
 
 
 @pytest.mark.parametrize('allocation', ['priority', 'clip'])
-@pytest.mark.parametrize('kind', ['pid', 'smc-integral', 'se3'])
+@pytest.mark.parametrize('kind', ['pid', 'smc-integral', 'se3', 'l1-se3', 'indi'])
 def test_a_batch_is_three_single_vehicles(kind, allocation):
     gains = copy.deepcopy(GAINS)
     gains['common']['allocation'] = allocation
