@@ -8,7 +8,7 @@ trajectories using incremental nonlinear dynamic inversion and differential flat
 Attitude (Smeur et al., sec. II-III). Instead of a model of the moments, INDI measures the angular
 acceleration and changes the moment by what the difference to the desired one needs:
 
-    M_c = M_f + G^-1 (alpha_d - alpha_f)                  (their eq. of the incremental control law)
+    M_c = M_f + G^-1 (alpha_d - alpha_f)                  (their incremental control law, sec. II)
 
 * alpha_f [rad/s^2, body]: the derivative of the body rates Omega after a first-order low-pass
   H(z) (cutoff ``rate_filter_hz``), alpha_f(k) = (Omega_f(k) - Omega_f(k-1)) / T_s;
@@ -17,8 +17,8 @@ acceleration and changes the moment by what the difference to the desired one ne
   at once), through the *same* filter H (the synchronisation of Smeur et al.: both sides of the
   increment carry the same lag);
 * G = diag(eta_i / J_i): the control effectiveness, the nominal J^-1 times the estimated ratio
-  eta (1 on the nominal vehicle), adapted online from the filtered increments (their LMS, eq. of the
-  adaptive G; here per axis and normalised, so that its step ``effectiveness_rate`` mu is a
+  eta (1 on the nominal vehicle), adapted online from the filtered increments (their LMS of the
+  adaptive G, sec. III; here per axis and normalised, so that its step ``effectiveness_rate`` mu is a
   fraction in (0, 2)):
 
       eta_i += mu (dalpha_i - eta_i du_i) du_i / (epsilon^2 + du_i^2),   du_i = dM_f,i / J_i

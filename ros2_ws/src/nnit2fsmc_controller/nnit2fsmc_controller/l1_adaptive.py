@@ -10,7 +10,7 @@ translational dynamics and an unknown angular acceleration sigma_w [rad/s^2, bod
 rotational ones (stated per unit of nominal mass and inertia, so the gains carry over between
 vehicles). With z = (v, Omega) the measured velocity [m/s, world] and body rates [rad/s, body FLU]:
 
-State predictor (L1Quad eq. of z-hat; A_s = -a_v I and -a_w I, Hurwitz):
+State predictor (L1Quad sec. III, its state predictor; A_s = -a_v I and -a_w I, Hurwitz):
 
     v-hat'     = -g e3 + (U1 / m) R e3 + sigma_v-hat - a_v (v-hat - v)
     Omega-hat' = J^-1 (M - Omega x J Omega) + sigma_w-hat - a_w (Omega-hat - Omega)
@@ -22,7 +22,7 @@ mu(T_s) = e^{A_s T_s} of the book, diagonal here):
 
     z-hat(k+1) = z(k) + mu (z-hat(k) - z(k)) + Phi (f(z(k), u(k)) + sigma-hat(k))
 
-Piecewise-constant adaptation law (book eq. 3.3.x; L1Quad's adaptation law):
+Piecewise-constant adaptation law (Hovakimyan & Cao sec. 3.3; L1Quad sec. III, its adaptation law):
 
     sigma-hat(k) = -Phi^-1 mu (z-hat(k) - z(k))
 
