@@ -33,6 +33,14 @@ Choices (docs/BASELINES.md):
 * The nominal model's drag terms (translational 5.6e-4 N s/m, rotational friction) are not fed
   forward: Lee et al. have none, and they are below 1e-3 of the weight on the paper flight.
 
+Take-off (``takeoff_height``, the hold every kind shares, docs/ADAPTIVE_BASELINES.md): below it the
+horizontal part of F_d is 0 (lift-off level) and I_x (x, y) and I_R hold.
+
+The adaptive kinds keep this structure and replace its parts (:mod:`.l1_adaptive`, :mod:`.indi`):
+:meth:`SE3Controller.desired_force` (F_d), :meth:`SE3Controller.moment` (M of the desired angular
+acceleration), :meth:`SE3Controller.compensated` (an augmentation of U1..U4) and
+:meth:`SE3Controller.applied` (what the rotors were commanded, for a predictor).
+
 One controller steps one vehicle (floats) or a batch (numpy arrays, ``batch=B``), through the
 namespace of :mod:`quad_msgs_bridge.numeric`.
 """
@@ -137,7 +145,7 @@ class SE3Controller:
 
     def on_ground(self, z):
         """Whether the take-off hold applies at height z [m] (a bool, or one per vehicle of a batch)."""
-        return z <= self.takeoff_height if self.takeoff_height > 0.0 else z != z   # z != z: False, or all-False
+        return (z <= self.takeoff_height) & (self.takeoff_height > 0.0)
 
     def desired_force(self, state, reference: ReferenceSample, acceleration, held) -> list:
         """F_d [N, world] for the feedback acceleration ``acceleration`` [m/s^2, world]: m (feedback + xdd_d + g e3).
