@@ -14,7 +14,7 @@ from flight_stack.embedded import published_path, setpoint_path
 from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, build_measurement_stage, load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.reference import hold
-from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 from quad_sim.model import QuadrotorModel
 from quad_sim.simulator import Simulator
 
@@ -197,3 +197,20 @@ def held_state(controller) -> np.ndarray:
     if hasattr(controller, 'position_integral'):
         values += [np.ravel(controller.position_integral[:2]), np.ravel(controller.attitude_integral)]
     return np.concatenate(values) if values else np.zeros(0)
+
+
+@pytest.mark.parametrize('kind, section, key, value', [
+    ('l1-se3', 'l1_se3', 'predictor_pole_translation', 0.0),
+    ('l1-se3', 'l1_se3', 'cutoff_rotation_hz', -1.0),
+    ('l1-se3', 'l1_se3', 'estimate_limit_translation', math.inf),
+    ('indi', 'indi', 'rate_filter_hz', 0.0),
+    ('indi', 'indi', 'effectiveness_rate', 2.0),
+    ('indi', 'indi', 'effectiveness_min', 1.5),
+    ('indi', 'indi', 'motor_time_constant', 'fast'),
+])
+def test_a_bad_adaptive_gain_is_refused_naming_it(kind, section, key, value):
+    """An invalid l1_se3 or indi gain stops the build with a ParameterError naming it and its valid range."""
+    gains = copy.deepcopy(GAINS)
+    gains[section][key] = value
+    with pytest.raises(ParameterError, match=rf'{section}\.{key}'):
+        build_controller(kind, VEHICLE, gains)

@@ -223,7 +223,7 @@ class IntegralSlidingModeLaw:
         self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.integral = 0.0
-        self.learning = True   #: False (or False per vehicle): the integral holds (the take-off hold, CascadedController)
+        self.learning = True   #: False (or per vehicle): the integral holds (take-off hold, CascadedController)
 
     def adapt(self) -> None:
         """Nothing to learn (the integral is part of the update)."""
@@ -254,7 +254,7 @@ class PIDLaw:
         self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.integral = 0.0
-        self.learning = True   #: False (or False per vehicle): the integral holds (the take-off hold, CascadedController)
+        self.learning = True   #: False (or per vehicle): the integral holds (take-off hold, CascadedController)
 
     def adapt(self) -> None:
         """Nothing to learn (the integral is part of the update)."""

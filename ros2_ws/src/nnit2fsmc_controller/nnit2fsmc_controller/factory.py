@@ -370,7 +370,8 @@ GAIN_DESCRIPTIONS = {
     'rate_filter_hz': 'indi: cutoff of the low-pass of the body rates and of the modelled moment [Hz]',
     'acceleration_filter_hz': 'indi: cutoff of the low-pass of the velocity and of the modelled thrust vector [Hz]',
     'motor_time_constant': 'indi: time constant of the modelled first-order rotor response [s] (0: instantaneous)',
-    'effectiveness_rate': 'indi: normalised LMS step mu of the control-effectiveness estimate, in [0, 2) (0: not adapted)',
+    'effectiveness_rate': 'indi: normalised LMS step mu of the control-effectiveness estimate, in [0, 2) '
+                          '(0: not adapted)',
     'effectiveness_threshold': 'indi: epsilon of the normalised LMS [rad/s^2]: increments well below it barely adapt',
     'effectiveness_min': 'indi: lower bound of the effectiveness ratio eta (estimated / nominal), in (0, 1]',
     'effectiveness_max': 'indi: upper bound of the effectiveness ratio eta (estimated / nominal), >= 1',
