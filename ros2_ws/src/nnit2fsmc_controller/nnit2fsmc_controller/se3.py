@@ -237,8 +237,8 @@ class SE3Controller:
         u2, u3, u4 = (m / s for m, s in zip(moment, scale))
         thrust, (u2, u3, u4) = self.compensated(state, rotation, thrust, (u2, u3, u4), held)
 
-        forces = allocate(self.allocation, thrust, u2, u3, u4, p.yaw_coefficient, p.F_min, p.F_max)
-        controls = controls_from_forces(*forces, p.yaw_coefficient)
+        forces = allocate(self.allocation, thrust, u2, u3, u4, p.mixer, p.F_min, p.F_max)
+        controls = controls_from_forces(*forces, p.mixer)
         self.applied(state, controls, held)
         lam = self.lam
         axes = {a: AxisOutput(force[k] / p.m, ev[k] + lam[a] * ex[k], reference.acceleration[k],
