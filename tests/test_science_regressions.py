@@ -133,7 +133,7 @@ def weights(network):
 def test_below_the_takeoff_height_only_the_z_network_learns(batch):
     """takeoff_height: on the ground the x, y and attitude networks hold and the desired tilt is 0; z learns
     (it lifts the vehicle)."""
-    gains = unflatten_gains({**flatten_gains(load_gains()), 'nnit2fsmc.takeoff_height': 0.05})
+    gains = unflatten_gains({**flatten_gains(load_gains()), 'common.takeoff_height': 0.05})
     controller = build_controller('nnit2fsmc', PARAMS, gains, batch=batch)
     start = {axis: weights(law.network).copy() for axis, law in controller.laws.items()}
     reference = Helix().sample(0.5)           # 0.5 s into the helix (its height: 5 cm)

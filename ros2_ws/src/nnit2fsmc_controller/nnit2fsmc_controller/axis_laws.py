@@ -223,6 +223,7 @@ class IntegralSlidingModeLaw:
         self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.integral = 0.0
+        self.learning = True   #: False (or per vehicle): the integral holds (take-off hold, CascadedController)
 
     def adapt(self) -> None:
         """Nothing to learn (the integral is part of the update)."""
@@ -230,7 +231,7 @@ class IntegralSlidingModeLaw:
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         xp = namespace_for(e)
         limit = self.integral_limit
-        integral = xp.clip(self.integral + e * self.dt, -limit, limit)
+        integral = xp.where(self.learning, xp.clip(self.integral + e * self.dt, -limit, limit), self.integral)
         surface = de + self.lam * e + self.mu * integral
         equivalent = ref_acc - self.lam * de - self.mu * e - drift
         bound = self.switching_gain + self.gain_uncertainty * xp.abs(equivalent)
@@ -253,13 +254,15 @@ class PIDLaw:
         self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.integral = 0.0
+        self.learning = True   #: False (or per vehicle): the integral holds (take-off hold, CascadedController)
 
     def adapt(self) -> None:
         """Nothing to learn (the integral is part of the update)."""
 
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         limit = self.integral_limit
-        self.integral = namespace_for(e).clip(self.integral + e * self.dt, -limit, limit)
+        xp = namespace_for(e)
+        self.integral = xp.where(self.learning, xp.clip(self.integral + e * self.dt, -limit, limit), self.integral)
         feedback = -(self.kp * e + self.ki * self.integral + self.kd * de)
         value = (ref_acc + feedback - drift) / gain
         return AxisOutput(value, de + self.lam * e, value, 0.0 * value)

@@ -17,7 +17,9 @@ from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check
 from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
 from .controller import ATTITUDE_RATES, AXES, CascadedController
 from .estimation import MeasurementStage
+from .indi import INDIController
 from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector, SaturationCorrector
+from .l1_adaptive import L1SE3Controller
 from .neural_network import MODIFICATIONS, EquivalentControlNetwork
 from .se3 import SE3Controller
 
@@ -25,7 +27,14 @@ DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controll
 #: the NNIT2FSMC's ablations (docs/ADAPTIVE.md): the IT2 term replaced by -K sat(S / Phi), type-1 fuzzy
 #: (lower membership functions = upper ones), learning off, and a network whose only input is the bias
 ABLATIONS = ('nnit2fsmc-sat', 'nnit2fsmc-type1', 'nnit2fsmc-nolearn', 'nnit2fsmc-bias')
-CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3') + ABLATIONS
+#: the adaptive baselines (docs/ADAPTIVE_BASELINES.md): L1 adaptive augmentation of se3, and INDI
+ADAPTIVE_BASELINES = ('l1-se3', 'indi')
+CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3') + ADAPTIVE_BASELINES + ABLATIONS
+#: the keys of the l1_se3 and indi sections (beside their axes), read as numbers
+L1_KEYS = ('predictor_pole_translation', 'predictor_pole_rotation', 'cutoff_translation_hz', 'cutoff_rotation_hz',
+           'estimate_limit_translation', 'estimate_limit_rotation')
+INDI_KEYS = ('rate_filter_hz', 'acceleration_filter_hz', 'motor_time_constant', 'effectiveness_rate',
+             'effectiveness_threshold', 'effectiveness_min', 'effectiveness_max')
 NN_INPUTS = 3   # (ref_vel, ref_acc, 1), see NNIT2FSMCLaw
 FEEDFORWARD_AXES = ('x', 'y')   #: where the virtual control is the subsystem's acceleration (nnit2fsmc.acceleration_feedforward)
 #: the paper-faithful value of every key that changes the controller away from the paper (docs/ADAPTIVE.md),
@@ -43,7 +52,7 @@ PAPER_FAITHFUL: dict = {
     'nnit2fsmc.learning_rate_unit': 'per_update',
     'nnit2fsmc.modification': 'none',
     'common.measurement_filter_hz': 0.0, 'common.velocity_filter_hz': 0.0,
-    'nnit2fsmc.takeoff_height': 0.0,
+    'common.takeoff_height': 0.0,
     'nnit2fsmc.acceleration_feedforward': False,
     # the first tuning's x, y network (the paper gives no numbers): output cap and initial hidden weights
     'nnit2fsmc.axes.x.nn_gain': 1.5, 'nnit2fsmc.axes.y.nn_gain': 1.5, 'nnit2fsmc.initial_weight_spread': 0.5,
@@ -185,11 +194,20 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
                      low_altitude_max_tilt=_positive(gains, 'common.low_altitude_max_tilt'),
                      low_altitude_height=_non_negative(gains, 'common.low_altitude_height'),
                      angle_filter_tau=_positive(gains, 'common.angle_filter_tau'),
-                     allocation=gains.get('common', {}).get('allocation', 'priority'))
-    if kind == 'se3':
+                     allocation=gains.get('common', {}).get('allocation', 'priority'),
+                     takeoff_height=_non_negative(gains, 'common.takeoff_height'), batch=batch)
+    if kind in ('se3', 'l1-se3'):
         se3_gains = {axis: tuple(_non_negative(gains, f'se3.axes.{axis}.{name}')
                                  for name in ('k_error', 'k_rate', 'k_integral', 'integral_limit')) for axis in AXES}
-        return SE3Controller(kind, params, se3_gains, lam, dt, **structure, batch=batch)
+        if kind == 'se3':
+            return SE3Controller(kind, params, se3_gains, lam, dt, **structure)
+        return L1SE3Controller(kind, params, se3_gains, lam, dt, {key: _get(gains, f'l1_se3.{key}') for key in L1_KEYS},
+                               **structure)
+    if kind == 'indi':
+        indi_gains = {axis: tuple(_non_negative(gains, f'indi.axes.{axis}.{name}') for name in ('k_error', 'k_rate'))
+                      for axis in AXES}
+        return INDIController(kind, params, indi_gains, lam, dt, {key: _get(gains, f'indi.{key}') for key in INDI_KEYS},
+                              **structure)
     if kind == 'nnit2fsmc' or kind in ABLATIONS:
         laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch) for axis in AXES}
     elif kind in ('smc-sign', 'smc-sat'):
@@ -216,11 +234,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
             dt=dt) for axis in AXES}
     else:
         raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
-    return CascadedController(
-        kind, params, laws, dt, **structure, batch=batch,
-        attitude_rates=_get(gains, 'common.attitude_rates'),
-        takeoff_height=(_non_negative(gains, 'nnit2fsmc.takeoff_height')
-                        if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0))
+    return CascadedController(kind, params, laws, dt, **structure, attitude_rates=_get(gains, 'common.attitude_rates'))
 
 
 def build_measurement_stage(gains: Mapping[str, Any] | None = None) -> MeasurementStage:
@@ -318,8 +332,9 @@ GAIN_DESCRIPTIONS = {
                              'measurement stage of every controller kind (0: none, paper)',
     'velocity_filter_hz': 'cutoff of the first-order low-pass of the measured velocities [Hz], the measurement '
                           'stage of every controller kind (0: none, paper)',
-    'takeoff_height': 'height [m, ground at z = 0] below which the vehicle is kept level and the x, y and attitude '
-                      'networks do not learn (0: off, paper)',
+    'takeoff_height': 'height [m, ground at z = 0] below which every controller kind keeps the vehicle level and '
+                      'holds what it adapts or integrates on the x, y and attitude axes (networks, integrators, L1 '
+                      'estimates, INDI increments) (0: off, paper)',
     'acceleration_feedforward': 'x, y: add the reference acceleration to the NN and fuzzy terms (false: paper)',
     'modification': 'leakage of the NN learning: none (paper), sigma (sigma-modification) or e (e-modification)',
     'leakage': 'leakage rate sigma of the sigma- or e-modification [1/s]',
@@ -343,9 +358,23 @@ GAIN_DESCRIPTIONS = {
     'slope': 'smc-integral linear gain inside the boundary layer [units of q\'\' per unit of S]',
     'integral_gain': 'smc-integral surface S = de + lambda e + integral_gain int(e) [1/s^2]',
     'gain_uncertainty': 'smc-integral relative control-gain uncertainty: adds this times |u_eq| to the switching gain',
-    'k_error': 'se3 attitude or position error gain, divided by J or m [1/s^2]',
-    'k_rate': 'se3 angular or linear velocity error gain, divided by J or m [1/s]',
+    'k_error': 'se3, indi attitude or position error gain, divided by J or m [1/s^2]',
+    'k_rate': 'se3, indi angular or linear velocity error gain, divided by J or m [1/s]',
     'k_integral': 'se3 integral gain, divided by J or m [1/s^3]',
+    'predictor_pole_translation': 'l1-se3: pole a_v of the velocity predictor, A_s = -a_v I [1/s]',
+    'predictor_pole_rotation': 'l1-se3: pole a_w of the body-rate predictor, A_s = -a_w I [1/s]',
+    'cutoff_translation_hz': 'l1-se3: cutoff of the low-pass C(s) of the thrust-axis compensation [Hz] (0: none)',
+    'cutoff_rotation_hz': 'l1-se3: cutoff of the low-pass C(s) of the angular-acceleration compensation [Hz] (0: none)',
+    'estimate_limit_translation': 'l1-se3: bound on each component of the acceleration estimate sigma_v [m/s^2]',
+    'estimate_limit_rotation': 'l1-se3: bound on each component of the angular-acceleration estimate sigma_w [rad/s^2]',
+    'rate_filter_hz': 'indi: cutoff of the low-pass of the body rates and of the modelled moment [Hz]',
+    'acceleration_filter_hz': 'indi: cutoff of the low-pass of the velocity and of the modelled thrust vector [Hz]',
+    'motor_time_constant': 'indi: time constant of the modelled first-order rotor response [s] (0: instantaneous)',
+    'effectiveness_rate': 'indi: normalised LMS step mu of the control-effectiveness estimate, in [0, 2) '
+                          '(0: not adapted)',
+    'effectiveness_threshold': 'indi: epsilon of the normalised LMS [rad/s^2]: increments well below it barely adapt',
+    'effectiveness_min': 'indi: lower bound of the effectiveness ratio eta (estimated / nominal), in (0, 1]',
+    'effectiveness_max': 'indi: upper bound of the effectiveness ratio eta (estimated / nominal), >= 1',
 }
 
 
