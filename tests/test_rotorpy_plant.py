@@ -117,20 +117,26 @@ def test_one_step_of_both_plants_agrees_at_level_attitude():
 @needs_rotorpy
 def test_both_plants_fly_the_same_10_s_paper_flight_with_rotorpys_effects_off():
     """The paper's scenario (disturbances on) with PID on the matched vehicle, on our plant and on RotorPy with aero
-    off and instant motors. The bounds are about 3x the differences measured (0.7 mm, 4.5 mm/s, 4 mrad, 0.044 rad/s,
-    all during the take-off transient, at 0.2 rad of roll and 0.75 rad/s): they come from the models' structures
-    (eq. 1's Euler-rate rotational dynamics against RotorPy's Newton-Euler with quaternions), not from the
-    integrators, which agree to 1e-10 per step where the structures coincide (the test above)."""
+    off and instant motors. The differences come from the models' structures (eq. 1 integrates Euler rates as if
+    they were body rates; RotorPy is Newton-Euler with quaternions), not from the integrators, which agree to
+    1e-10 per step where the structures coincide (the test above). Such a difference grows with attitude times
+    rate, so it is largest in the take-off (measured: 0.35 rad of roll at 4.6 rad/s, 1.2 mm, 7 mm/s, 13 mrad and
+    0.2 rad/s apart, 4 % of the largest angle and rate) and small once the vehicle tracks (after 2 s: 0.44 mm,
+    1.4 mm/s, 0.6 mrad, 1.4 mrad/s). The bounds are about 2.5-3x those."""
     from flight_stack.api import fly
     ours = fly('pid', 'paper', duration=10.0, vehicle=MATCHED, plant='quad_sim')
     theirs = fly('pid', 'paper', duration=10.0, vehicle=MATCHED, plant='rotorpy-bare')
     assert ours.state.shape == theirs.state.shape and ours.time[-1] >= 9.99
-    difference = np.abs(ours.state - theirs.state).max(axis=0)
-    assert difference[:3].max() < 2e-3          # position [m]
-    assert difference[3:6].max() < 1.5e-2       # velocity [m/s]
-    assert difference[6:9].max() < 1.5e-2       # Euler angles [rad]
-    assert difference[9:].max() < 0.15          # Euler rates [rad/s]
-    assert np.abs(ours.state[:, :3] - ours.reference_position).max() > 10 * difference[:3].max()   # it flew
+    difference = np.abs(ours.state - theirs.state)
+    whole = difference.max(axis=0)
+    assert whole[:3].max() < 3e-3                                          # position [m]
+    assert whole[3:6].max() < 2e-2                                         # velocity [m/s]
+    assert whole[6:9].max() < 0.1 * np.abs(ours.state[:, 6:8]).max()       # Euler angles [rad]: 10 % of the largest
+    assert whole[9:].max() < 0.1 * np.abs(ours.state[:, 9:]).max()         # Euler rates [rad/s]: 10 % of the largest
+    tracking = difference[ours.time > 2.0].max(axis=0)
+    assert tracking[:3].max() < 1.5e-3 and tracking[3:6].max() < 5e-3      # [m], [m/s]
+    assert tracking[6:9].max() < 2e-3 and tracking[9:].max() < 5e-3        # [rad], [rad/s]
+    assert np.abs(ours.state[:, :3] - ours.reference_position).max() > 10 * whole[:3].max()   # it flew
 
 
 @needs_rotorpy
