@@ -50,6 +50,7 @@ PAPER_FAITHFUL: dict = {
     # the first tuning's x, y network (the paper gives no numbers): output cap and initial hidden weights
     'nnit2fsmc.axes.x.nn_gain': 1.5, 'nnit2fsmc.axes.y.nn_gain': 1.5, 'nnit2fsmc.initial_weight_spread': 0.5,
     'nnit2fsmc.axes.x.learning_rate': 0.01, 'nnit2fsmc.axes.y.learning_rate': 0.01,
+    'nnit2fsmc.axes.x.max_adaptation_rate': 0.0, 'nnit2fsmc.axes.y.max_adaptation_rate': 0.0,
     # per update, in acceleration units: 0.002, 0.05, 0.05 and 30 in N (N m) on the packaged vehicle, restated exactly
     'nnit2fsmc.axes.z.learning_rate': 0.000472392, 'nnit2fsmc.axes.phi.learning_rate': 1.1721642272e-05,
     'nnit2fsmc.axes.theta.learning_rate': 1.1721642272e-05, 'nnit2fsmc.axes.psi.learning_rate': 0.0017587057068000002,
@@ -288,7 +289,8 @@ def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt
         initial_spread=_positive(gains, 'nnit2fsmc.initial_weight_spread'),
         seed=int(_non_negative(gains, 'nnit2fsmc.seed')) * len(AXES) + AXES.index(axis), batch=batch,
         modification=modification,
-        leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0)
+        leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0,
+        max_rate=_non_negative(gains, f'{key}.max_adaptation_rate') * dt)
     return NNIT2FSMCLaw(lam, fuzzy, network, bias_only=kind == 'nnit2fsmc-bias',
                         feedforward=axis in FEEDFORWARD_AXES and _flag(gains, 'nnit2fsmc.acceleration_feedforward'))
 
@@ -352,6 +354,8 @@ GAIN_DESCRIPTIONS = {
                'vehicle]',
     'learning_rate': 'NN learning rate alpha of eqs. (6)-(7) in acceleration units, per second or per update '
                      '(learning_rate_unit); divided by the square of m, Ix/d, Iy/d or Iz on the vehicle',
+    'max_adaptation_rate': 'largest adaptation rate of the NN [1/s]: the learning step is scaled down where the rate '
+                           'at which U_eq_hat follows the fuzzy term would exceed it (0: no bound, paper)',
     'learning_rate_unit': 'unit of the learning rates: per_second (alpha dt per update) or per_update (paper)',
     'boundary_layer': 'smc-sat boundary-layer width [units of S]',
     'switching_gain': 'SMC switching gain [units of the second derivative of the subsystem]',
