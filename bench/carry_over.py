@@ -47,7 +47,8 @@ def cases(heavy: str, seeds: int) -> dict:
     wind = {'mean_speed_mps': 8.0, 'turbulence': 'moderate'}
     return {
         'a': [('lemniscate', {})],
-        'b': [('paper', dict(vehicle=heavy, wind=wind, motor_time_constant_s=0.005, seed=seed)) for seed in range(seeds)],
+        'b': [('paper', dict(vehicle=heavy, wind=wind, motor_time_constant_s=0.005, seed=seed))
+              for seed in range(seeds)],
         'c': [('paper', dict(rotor_efficiency_loss=LOSS)),
               ('paper', dict(vehicle=heavy, rotor_efficiency_loss=LOSS, motor_time_constant_s=0.005))],
     }

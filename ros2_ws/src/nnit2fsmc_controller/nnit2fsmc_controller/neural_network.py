@@ -190,8 +190,9 @@ class EquivalentControlNetwork:
         self.output_weights = np.zeros(vehicles + (n_hidden,))
         #: anchors W0 of the leakage: the initial weights
         self._hidden_anchor, self._output_anchor = self.hidden_weights.copy(), self.output_weights.copy()
-        #: (learning rate, K_eq, leakage, e-modification?, weight limit, adaptation-rate bound): the learning step's constants, in
-        #: :func:`learning_step`'s order (a network's constants are fixed when it is built; a retune builds a new one)
+        #: (learning rate, K_eq, leakage, e-modification?, weight limit, adaptation-rate bound): the learning
+        #: step's constants, in :func:`learning_step`'s order (a network's constants are fixed when it is built;
+        #: a retune builds a new one)
         self.kernel_constants = (self.learning_rate, self.output_gain, self.leakage, self.modification == 'e',
                                  self.weight_limit, self.max_rate)
         self._inputs = (0.0,) * n_inputs if batch is None else np.zeros((batch, n_inputs))
