@@ -12,7 +12,8 @@ Conventions (the paper's, REP 103):
 * reference: :class:`Reference` (position [m], velocity [m/s], acceleration [m/s^2], all world
   ENU; yaw [rad], yaw rate [rad/s], yaw acceleration [rad/s^2]; jerk [m/s^3] and snap [m/s^4],
   zeros if left out, which the default flatness attitude rates use); :func:`hold` holds a point;
-* output: rotor thrusts F1 front, F2 right, F3 back, F4 left [N] within the rotor limits, the
+* output: rotor thrusts F1..F4 [N] in the vehicle's rotor layout (``VehicleParams.rotor_names``; the
+  paper's plus frame: F1 front, F2 right, F3 back, F4 left) within the rotor limits, the
   virtual controls U1 [N], U2 [N], U3 [N], U4 [N m] of the paper's eq. (2) they realise, and per
   subsystem (x, y, z, phi, theta, psi) the sliding surface, equivalent and corrective terms.
 
@@ -40,7 +41,8 @@ __all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'F
 
 
 def load_vehicle(path: str | Path | None = None) -> VehicleParams:
-    """The vehicle description (paper Table I, SI units) of a vehicle YAML; None: the packaged one."""
+    """The vehicle description (paper Table I, SI units) of a vehicle YAML or of a shipped vehicle by name
+    ('paper', 'crazyflie', 'hummingbird', 'x500': docs/VEHICLES.md); None: the packaged one (the paper's)."""
     return load_vehicle_file(path)[0]
 
 

@@ -69,7 +69,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--overwrite', action='store_true',
                         help='replace an earlier run in --out (its summary, bag, report, plots; other files stay) '
                              'and an existing --bag')
-    parser.add_argument('--vehicle', type=Path, default=None, help='vehicle YAML (default: the packaged one)')
+    parser.add_argument('--vehicle', type=Path, default=None,
+                        help='vehicle YAML, or a shipped vehicle by name: paper (the default), crazyflie, hummingbird, x500')
     parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
     parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz], a multiple of the control rate')
     parser.add_argument('--settle-time', type=float, default=None,

@@ -46,7 +46,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='fly flight K alone on the ordinary embedded path, with its bag and review, '
                              'into DIR/replay-K/<controller>/')
     parser.add_argument('--resume', action='store_true', help='fly only the flights DIR/flights.csv lacks')
-    parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle YAML (default: the packaged one)')
+    parser.add_argument('--vehicle', type=Path, default=None,
+                        help='nominal vehicle YAML, or a shipped vehicle by name: paper (the default), crazyflie, '
+                             'hummingbird, x500')
     parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     args = parser.parse_args(argv)

@@ -329,10 +329,10 @@ class CascadedController:
                                      1.0 / p.Iz)
 
         forces = allocate(self.allocation, out_z.value, out_phi.value, out_theta.value, out_psi.value,
-                          p.yaw_coefficient, p.F_min, p.F_max)
+                          p.mixer, p.F_min, p.F_max)
         return ControlOutput(
             forces=forces,
-            controls=controls_from_forces(*forces, p.yaw_coefficient),
+            controls=controls_from_forces(*forces, p.mixer),
             axes={'x': out_x, 'y': out_y, 'z': out_z, 'phi': out_phi, 'theta': out_theta, 'psi': out_psi},
             attitude_reference=(phi_d, theta_d, psi_d))
 

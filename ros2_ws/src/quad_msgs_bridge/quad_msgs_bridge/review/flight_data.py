@@ -39,7 +39,7 @@ SERIES = {
     'state': (STATE_SIZE, None),               # STATE_NAMES; units in STATE_UNITS
     'reference_position': (3, 'm'),            # world ENU
     'reference_yaw': (1, 'rad'),
-    'forces': (4, 'N'),                        # rotor thrusts F1 front, F2 right, F3 back, F4 left
+    'forces': (4, 'N'),                        # rotor thrusts F1..F4 in the vehicle's layout (params.rotor_names)
     'controls': (4, None),                     # U1 [N], U2 [N], U3 [N], U4 [N m] of eq. (2)
     'surfaces': (6, None),                     # S = de + lambda e per subsystem (SURFACE_UNITS)
     'equivalent': (6, None),                   # NN equivalent-control term per subsystem
@@ -65,7 +65,8 @@ class Flight:
       [rad] (Z-Y-X Euler angles), ``dphi dtheta dpsi`` [rad/s] (Euler-angle rates), as the odometry
       gives them (the true state; ``ground_truth/odom`` when the odometry carries sensor noise);
     * ``reference_position`` (N, 3) [m, world ENU], ``reference_yaw`` (N,) [rad];
-    * ``forces`` (N, 4) rotor thrusts F1 front, F2 right, F3 back, F4 left [N];
+    * ``forces`` (N, 4) rotor thrusts F1..F4 [N] in the order of the vehicle's layout (``params.rotor_names``;
+      the paper's plus frame: F1 front, F2 right, F3 back, F4 left);
     * ``controls`` (N, 4) U1 [N], U2 [N], U3 [N], U4 [N m] (paper eq. (2));
     * ``surfaces``, ``equivalent``, ``corrective`` (N, 6) per subsystem x, y, z, phi, theta, psi: the
       sliding surface S [m/s or rad/s], the NN equivalent-control term and the fuzzy corrective term
