@@ -49,6 +49,16 @@ def disturbances_label(enabled: bool) -> str:
 #: custom data keys of a flight that failed: why (flight_stack.closed_loop.FAILURES) and when [s, sim time];
 #: in a fleet's bag each vehicle's are suffixed with ':<namespace>' (see vehicle_custom_data)
 FAILURE_KEY, FAILURE_TIME_KEY = 'failure', 'failure_time_s'
+#: custom data keys of the run's plan: the flight's planned length [s] and its --max-error [m]; and why a
+#: flight stopped before that length without failing (``interrupted``: Ctrl-C), see quad_msgs_bridge.review.verdict
+DURATION_KEY, MAX_ERROR_KEY, STOPPED_KEY = 'duration_s', 'max_error_m', 'stopped'
+
+
+def mark_interrupted(writer: BagWriter, exc_type) -> None:
+    """Note in the bag's custom data (written when it closes) that a stop signal (KeyboardInterrupt) ended
+    the flight, so its review says so."""
+    if exc_type is not None and issubclass(exc_type, KeyboardInterrupt):
+        writer.custom_data[STOPPED_KEY] = 'interrupted'
 
 
 def recorded_failure(custom: dict) -> tuple[str, float] | None:
@@ -173,6 +183,7 @@ class FlightBag:
         return self
 
     def __exit__(self, exc_type, exc, traceback) -> None:
+        mark_interrupted(self.writer, exc_type)
         self.writer.__exit__(exc_type, exc, traceback)
 
 
@@ -217,4 +228,5 @@ class FleetBag:
         return self
 
     def __exit__(self, exc_type, exc, traceback) -> None:
+        mark_interrupted(self.writer, exc_type)
         self.writer.__exit__(exc_type, exc, traceback)
