@@ -55,10 +55,10 @@ def nnit2fsmc_step(hidden_weights, output_weights, hidden_anchor, output_anchor,
     ``network`` is EquivalentControlNetwork.kernel_constants, ``fuzzy`` the corrector's kernel_parameters.
     Returns (v, S, U_eq_hat, U_fuzzy, the fuzzy term to learn from next, U_out): the network learns
     only while |S| is inside the fuzzy universe and ``learning`` holds (NNIT2FSMCLaw)."""
-    learning_rate, output_gain, leakage, e_modification, limit = network
+    learning_rate, output_gain, leakage, e_modification, limit, max_rate = network
     if pending:
         learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, previous_inputs, hidden,
-                      previous_output, teaching, learning_rate, output_gain, leakage, e_modification, limit)
+                      previous_output, teaching, learning_rate, output_gain, leakage, e_modification, limit, max_rate)
     surface = de + lam * e
     corrective = corrective_term(fuzzy, surface)
     output = forward_pass(hidden_weights, output_weights, inputs, hidden)

@@ -17,6 +17,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check
 from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
 from .controller import ATTITUDE_RATES, AXES, CascadedController
 from .estimation import MeasurementStage
+from .gain_units import check_hover_authority, in_vehicle_units
 from .indi import INDIController
 from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector, SaturationCorrector
 from .l1_adaptive import L1SE3Controller
@@ -48,7 +49,8 @@ PAPER_FAITHFUL: dict = {
     'nnit2fsmc.axes.x.input_scale': 0.3, 'nnit2fsmc.axes.y.input_scale': 0.3,
     'nnit2fsmc.axes.x.fuzzy_gain': 3.0, 'nnit2fsmc.axes.y.fuzzy_gain': 3.0,
     'nnit2fsmc.axes.phi.input_scale': 2.0, 'nnit2fsmc.axes.theta.input_scale': 2.0,
-    'nnit2fsmc.axes.phi.fuzzy_gain': 1.0, 'nnit2fsmc.axes.theta.fuzzy_gain': 1.0,
+    # [rad/s^2]: 1 N of U2, U3 on the packaged vehicle, restated exactly (gain_units; config/controller.yaml)
+    'nnit2fsmc.axes.phi.fuzzy_gain': 65.31166727624223, 'nnit2fsmc.axes.theta.fuzzy_gain': 65.31166727624223,
     'nnit2fsmc.learning_rate_unit': 'per_update',
     'nnit2fsmc.modification': 'none',
     'common.measurement_filter_hz': 0.0, 'common.velocity_filter_hz': 0.0,
@@ -57,8 +59,10 @@ PAPER_FAITHFUL: dict = {
     # the first tuning's x, y network (the paper gives no numbers): output cap and initial hidden weights
     'nnit2fsmc.axes.x.nn_gain': 1.5, 'nnit2fsmc.axes.y.nn_gain': 1.5, 'nnit2fsmc.initial_weight_spread': 0.5,
     'nnit2fsmc.axes.x.learning_rate': 0.01, 'nnit2fsmc.axes.y.learning_rate': 0.01,
-    'nnit2fsmc.axes.z.learning_rate': 0.002, 'nnit2fsmc.axes.phi.learning_rate': 0.05,
-    'nnit2fsmc.axes.theta.learning_rate': 0.05, 'nnit2fsmc.axes.psi.learning_rate': 30.0,
+    'nnit2fsmc.axes.x.max_adaptation_rate': 0.0, 'nnit2fsmc.axes.y.max_adaptation_rate': 0.0,
+    # per update, in acceleration units: 0.002, 0.05, 0.05 and 30 in N (N m) on the packaged vehicle, restated exactly
+    'nnit2fsmc.axes.z.learning_rate': 0.000472392, 'nnit2fsmc.axes.phi.learning_rate': 1.1721642272e-05,
+    'nnit2fsmc.axes.theta.learning_rate': 1.1721642272e-05, 'nnit2fsmc.axes.psi.learning_rate': 0.0017587057068000002,
 }
 
 
@@ -165,8 +169,9 @@ def control_period(gains: Mapping[str, Any]) -> float:
 LEARNING_RATE_UNITS = ('per_second', 'per_update')
 
 
-def learning_rate(gains: Mapping[str, Any], axis: str, dt: float) -> float:
-    """The network's rate alpha per update for subsystem ``axis`` at control period ``dt`` [s].
+def learning_rate(gains: Mapping[str, Any], axis: str, dt: float, params: VehicleParams) -> float:
+    """The network's rate alpha per update for subsystem ``axis`` at control period ``dt`` [s] on the nominal
+    vehicle ``params`` (stated in acceleration units, :mod:`.gain_units`; the law's is alpha b^2).
 
     ``nnit2fsmc.learning_rate_unit``: ``per_second`` (alpha of eqs. 6-7 is a rate per second, the
     continuous-time adaptation gain; the step per update is alpha dt, so a change of control rate
@@ -175,7 +180,8 @@ def learning_rate(gains: Mapping[str, Any], axis: str, dt: float) -> float:
     unit = _get(gains, 'nnit2fsmc.learning_rate_unit')
     if unit not in LEARNING_RATE_UNITS:
         raise ParameterError(f'nnit2fsmc.learning_rate_unit: {unit!r} is not one of {", ".join(LEARNING_RATE_UNITS)}')
-    alpha = _non_negative(gains, f'nnit2fsmc.axes.{axis}.learning_rate')
+    name = f'nnit2fsmc.axes.{axis}.learning_rate'
+    alpha = in_vehicle_units(name, _non_negative(gains, name), params, axis)
     return alpha * dt if unit == 'per_second' else alpha
 
 
@@ -209,7 +215,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
         return INDIController(kind, params, indi_gains, lam, dt, {key: _get(gains, f'indi.{key}') for key in INDI_KEYS},
                               **structure)
     if kind == 'nnit2fsmc' or kind in ABLATIONS:
-        laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch) for axis in AXES}
+        laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch, params) for axis in AXES}
     elif kind in ('smc-sign', 'smc-sat'):
         laws = {axis: SlidingModeLaw(
             lam[axis], _non_negative(gains, f'smc.switching_gain.{axis}'),
@@ -263,12 +269,21 @@ def compile_kernels(kind: str, params: VehicleParams, gains: Mapping[str, Any] |
     quaternion_from_euler(0.0, 0.0, 0.0)
 
 
+def _authority(gains: Mapping[str, Any], name: str, params: VehicleParams, axis: str):
+    """The output cap ``name`` (fuzzy_gain or nn_gain, stated in acceleration units) in the law's units on the
+    nominal vehicle ``params``, after the hover check of :func:`.gain_units.check_hover_authority`."""
+    stated = _positive(gains, name) if name.endswith('nn_gain') else _non_negative(gains, name)
+    check_hover_authority(name, stated, params)
+    return in_vehicle_units(name, stated, params, axis)
+
+
 def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt: float,
-                  batch: int | None) -> NNIT2FSMCLaw:
-    """The NNIT2FSMC law of subsystem ``axis``, or of one of its ABLATIONS (``kind``)."""
+                  batch: int | None, params: VehicleParams) -> NNIT2FSMCLaw:
+    """The NNIT2FSMC law of subsystem ``axis``, or of one of its ABLATIONS (``kind``), on the nominal vehicle
+    ``params``: the gains file's acceleration units turned into the law's (:mod:`.gain_units`)."""
     key = f'nnit2fsmc.axes.{axis}'
     input_scale = _positive(gains, f'{key}.input_scale')
-    fuzzy_gain = _non_negative(gains, f'{key}.fuzzy_gain')
+    fuzzy_gain = _authority(gains, f'{key}.fuzzy_gain', params, axis)
     if kind == 'nnit2fsmc-sat':
         fuzzy = SaturationCorrector(input_scale, fuzzy_gain)
     else:
@@ -282,13 +297,14 @@ def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt
     network = EquivalentControlNetwork(
         n_inputs=1 if kind == 'nnit2fsmc-bias' else NN_INPUTS,
         n_hidden=int(_positive(gains, 'nnit2fsmc.hidden_units')),
-        output_gain=_positive(gains, f'{key}.nn_gain'),
-        learning_rate=0.0 if kind == 'nnit2fsmc-nolearn' else learning_rate(gains, axis, dt),
+        output_gain=_authority(gains, f'{key}.nn_gain', params, axis),
+        learning_rate=0.0 if kind == 'nnit2fsmc-nolearn' else learning_rate(gains, axis, dt, params),
         weight_limit=_positive(gains, 'nnit2fsmc.weight_limit'),
         initial_spread=_positive(gains, 'nnit2fsmc.initial_weight_spread'),
         seed=int(_non_negative(gains, 'nnit2fsmc.seed')) * len(AXES) + AXES.index(axis), batch=batch,
         modification=modification,
-        leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0)
+        leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0,
+        max_rate=_non_negative(gains, f'{key}.max_adaptation_rate') * dt)
     return NNIT2FSMCLaw(lam, fuzzy, network, bias_only=kind == 'nnit2fsmc-bias',
                         feedforward=axis in FEEDFORWARD_AXES and _flag(gains, 'nnit2fsmc.acceleration_feedforward'))
 
@@ -347,9 +363,14 @@ GAIN_DESCRIPTIONS = {
     'seed': 'seed of the initial hidden weights',
     'initial_weight_spread': 'the initial hidden weights are drawn uniformly from +-this (seeded by seed)',
     'input_scale': 'sliding-surface value that saturates the fuzzy input [units of S]',
-    'fuzzy_gain': 'IT2 fuzzy corrective output gain [units of the subsystem control]',
-    'nn_gain': 'NN output gain K_eq [units of the subsystem control]',
-    'learning_rate': 'NN learning rate alpha of eqs. (6)-(7), per second or per update (learning_rate_unit)',
+    'fuzzy_gain': 'IT2 fuzzy corrective output gain [m/s^2 or rad/s^2: the acceleration it gives; times m, Ix/d, '
+                  'Iy/d or Iz on the vehicle]',
+    'nn_gain': 'NN output gain K_eq [m/s^2 or rad/s^2: the acceleration it gives; times m, Ix/d, Iy/d or Iz on the '
+               'vehicle]',
+    'learning_rate': 'NN learning rate alpha of eqs. (6)-(7) in acceleration units, per second or per update '
+                     '(learning_rate_unit); divided by the square of m, Ix/d, Iy/d or Iz on the vehicle',
+    'max_adaptation_rate': 'largest adaptation rate of the NN [1/s]: the learning step is scaled down where the rate '
+                           'at which U_eq_hat follows the fuzzy term would exceed it (0: no bound, paper)',
     'learning_rate_unit': 'unit of the learning rates: per_second (alpha dt per update) or per_update (paper)',
     'boundary_layer': 'smc-sat boundary-layer width [units of S]',
     'switching_gain': 'SMC switching gain [units of the second derivative of the subsystem]',
