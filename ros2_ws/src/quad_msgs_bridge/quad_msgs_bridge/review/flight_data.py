@@ -17,7 +17,6 @@ them over every step as it goes, and :meth:`Flight.metrics` uses those sums once
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -25,9 +24,11 @@ from typing import Sequence
 import numpy as np
 
 from quad_msgs_bridge.bag.flight_bag import recorded_failure
+from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.mixer import CONTROL_NAMES
-from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, FlightRecord, StatisticsAccumulator,
-                                             flight_metrics, has_fuzzy_term, metrics_from_statistics)
+from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, FlightRecord, TrackingStatistics,
+                                             flight_metrics, has_fuzzy_term, metrics_from_statistics,
+                                             rotor_at_limit)
 from quad_msgs_bridge.state import PSI, STATE_NAMES, STATE_SIZE
 from quad_msgs_bridge.vehicle_params import VehicleParams
 
@@ -48,7 +49,7 @@ SERIES = {
 STATE_UNITS = ('m', 'm', 'm', 'm/s', 'm/s', 'm/s', 'rad', 'rad', 'rad', 'rad/s', 'rad/s', 'rad/s')
 #: the sliding surfaces' units: of a velocity error (x, y, z) or an angular rate error (phi, theta, psi)
 SURFACE_UNITS = ('m/s', 'm/s', 'm/s', 'rad/s', 'rad/s', 'rad/s')
-_WIDTH = sum(columns for columns, _ in SERIES.values())
+WIDTH = sum(columns for columns, _ in SERIES.values())   #: columns of a row of all SERIES side by side
 _SLICES, _start = {}, 0
 for _name, (_columns, _) in SERIES.items():
     _SLICES[_name], _start = slice(_start, _start + _columns), _start + _columns
@@ -138,33 +139,69 @@ class Flight:
 
 
 class StepSums:
-    """The metrics' sums over every control step of a flight, added one step at a time."""
+    """The metrics' sums over every control step of a flight, added a block of rows at a time (rows as
+    :class:`FlightLog` keeps them: the SERIES side by side, in step order)."""
 
     def __init__(self, settle_time: float, f_min: float, f_max: float, share_window: float = SHARE_WINDOW):
-        self.settle_time, self.share_window = settle_time, share_window
-        self.statistics = StatisticsAccumulator(settle_time, f_min, f_max)
+        self.settle_time, self.share_window, self.f_min, self.f_max = settle_time, share_window, f_min, f_max
+        self.steps = self.settled_steps = self.saturated_steps = self.saturated_settled_steps = 0
+        self.squared_error_sum = self.max_error = self.squared_yaw_error_sum = 0.0
+        self.variation = np.zeros(4)
         self.all_finite = True
         self.first_time: float | None = None
-        self.last_time = 0.0
+        self.last_time = self.first_settled_time = self.last_settled_time = 0.0
+        self._last_settled_controls: np.ndarray | None = None
         #: fuzzy share window k (steps with k <= (t - first time) / share_window < k + 1) -> per subsystem
         #: (sum |corrective|, sum |equivalent| + |corrective|)
         self.shares: dict[int, np.ndarray] = {}
 
-    def add(self, t: float, state, reference_position, reference_yaw: float, forces, controls,
-            equivalent, corrective) -> None:
+    def add_rows(self, rows: np.ndarray) -> None:
+        """The next control steps, one row each (at least one)."""
+        t = rows[:, _SLICES['time'].start]
+        position, yaw = rows[:, _SLICES['state']][:, :3], rows[:, _SLICES['state'].start + PSI]
+        forces, controls = rows[:, _SLICES['forces']], rows[:, _SLICES['controls']]
         if self.first_time is None:
-            self.first_time = t
-        self.last_time = t
-        self.statistics.add(t, state[:3], state[PSI], reference_position, reference_yaw, forces, controls)
-        self.all_finite = self.all_finite and all(map(math.isfinite, forces)) and \
-            all(map(math.isfinite, state[:3]))
-        window = int((t - self.first_time) // self.share_window)
-        sums = self.shares.get(window)
-        if sums is None:
-            sums = self.shares[window] = np.zeros((2, len(SUBSYSTEMS)))
-        fuzzy = np.abs(corrective)
-        sums[0] += fuzzy
-        sums[1] += np.abs(equivalent) + fuzzy
+            self.first_time = float(t[0])
+        self.last_time = float(t[-1])
+        self.steps += len(t)
+        at_limit = rotor_at_limit(forces.T, self.f_min, self.f_max)
+        self.saturated_steps += int(at_limit.sum())
+        self.all_finite = self.all_finite and bool(np.isfinite(forces).all() and np.isfinite(position).all())
+        settled = t >= self.first_time + self.settle_time
+        if settled.any():
+            error = position[settled] - rows[settled, _SLICES['reference_position']]
+            squared = (error * error).sum(axis=1)
+            yaw_error = wrap_angle(yaw[settled] - rows[settled, _SLICES['reference_yaw'].start])
+            settled_controls = controls[settled]
+            if self._last_settled_controls is None:
+                self.first_settled_time = float(t[settled][0])
+            else:
+                settled_controls = np.vstack((self._last_settled_controls, settled_controls))
+            self.variation = self.variation + np.abs(np.diff(settled_controls, axis=0)).sum(axis=0)
+            self._last_settled_controls = settled_controls[-1].copy()
+            self.settled_steps += int(settled.sum())
+            self.squared_error_sum += float(squared.sum())
+            self.max_error = max(self.max_error, float(np.sqrt(squared.max())))
+            self.squared_yaw_error_sum += float((yaw_error * yaw_error).sum())
+            self.saturated_settled_steps += int(at_limit[settled].sum())
+            self.last_settled_time = float(t[settled][-1])
+        windows = ((t - self.first_time) // self.share_window).astype(np.int64)
+        fuzzy = np.abs(rows[:, _SLICES['corrective']])
+        total = np.abs(rows[:, _SLICES['equivalent']]) + fuzzy
+        for window in np.unique(windows):
+            inside = windows == window
+            sums = self.shares.setdefault(int(window), np.zeros((2, len(SUBSYSTEMS))))
+            sums[0] += fuzzy[inside].sum(axis=0)
+            sums[1] += total[inside].sum(axis=0)
+
+    def statistics(self) -> TrackingStatistics:
+        return TrackingStatistics(
+            steps=self.steps, settled_steps=self.settled_steps, squared_error_sum=self.squared_error_sum,
+            max_error=self.max_error, squared_yaw_error_sum=self.squared_yaw_error_sum,
+            variation=tuple(float(v) for v in self.variation),
+            settled_span=self.last_settled_time - self.first_settled_time, saturated_steps=self.saturated_steps,
+            saturated_settled_steps=self.saturated_settled_steps, first_time=self.first_time,
+            last_time=self.last_time)
 
     def fuzzy_share(self) -> dict[str, list[float]]:
         """As :func:`~quad_msgs_bridge.review.metrics.fuzzy_share`, from the sums."""
@@ -173,15 +210,19 @@ class StepSums:
                 for i, name in enumerate(SUBSYSTEMS)}
 
     def metrics(self, fuzzy_term: bool, ended_early: bool, arm_length: float | None = None) -> dict:
-        return metrics_from_statistics(self.statistics.statistics(), self.settle_time, self.all_finite,
+        return metrics_from_statistics(self.statistics(), self.settle_time, self.all_finite,
                                        self.fuzzy_share() if fuzzy_term else None, self.share_window,
                                        ended_early=ended_early, arm_length=arm_length)
 
 
+#: rows a FlightLog collects before it sums and keeps them (a step's add is then one row written)
+PENDING_ROWS = 1024
+
+
 class FlightLog:
-    """Collects a flight one control step at a time, in bounded memory (see the module doc), and hands
-    out the :class:`Flight`. ``settle_time`` [s] and the rotor limits ``f_min``, ``f_max`` [N] are those
-    of the metrics."""
+    """Collects a flight one control step (:meth:`add`) or a block of steps (:meth:`add_rows`) at a time,
+    in bounded memory (see the module doc), and hands out the :class:`Flight`. ``settle_time`` [s] and the
+    rotor limits ``f_min``, ``f_max`` [N] are those of the metrics."""
 
     def __init__(self, settle_time: float, f_min: float, f_max: float, max_rows: int = MAX_ROWS):
         if max_rows < 2 or max_rows % 2:
@@ -189,28 +230,56 @@ class FlightLog:
         self.max_rows = max_rows
         self.sums = StepSums(settle_time, f_min, f_max)
         self.settle_time = settle_time
-        self.steps = 0
+        self.steps = 0                   #: control steps added
         self.stride = 1
-        self._rows = np.empty((min(4096, max_rows), _WIDTH))
-        self._count = 0
+        self._rows = np.empty((min(4096, max_rows), WIDTH))
+        self._count = 0                  #: rows kept
+        self._taken = 0                  #: steps summed and kept (or dropped) so far
+        self._pending = np.empty((PENDING_ROWS, WIDTH))
+        self._filled = 0
 
     def add(self, t: float, state: Sequence[float], reference_position: Sequence[float], reference_yaw: float,
             forces: Sequence[float], controls: Sequence[float], surfaces: Sequence[float],
             equivalent: Sequence[float], corrective: Sequence[float]) -> None:
         """One control step (units as in :class:`Flight`)."""
-        self.sums.add(t, state, reference_position, reference_yaw, forces, controls, equivalent, corrective)
-        step, self.steps = self.steps, self.steps + 1
-        if step % self.stride:
+        if self._filled == PENDING_ROWS:
+            self._flush()
+        self._pending[self._filled] = (t, *state, *reference_position, reference_yaw, *forces, *controls,
+                                       *surfaces, *equivalent, *corrective)
+        self._filled += 1
+        self.steps += 1
+
+    def add_rows(self, rows: np.ndarray) -> None:
+        """Control steps as rows of the SERIES side by side (shape (N, WIDTH), units as in :class:`Flight`)."""
+        self._flush()
+        self.steps += len(rows)
+        self._take(rows)
+
+    def _flush(self) -> None:
+        if self._filled:
+            filled, self._filled = self._filled, 0
+            self._take(self._pending[:filled])
+
+    def _take(self, rows: np.ndarray) -> None:
+        """Sum ``rows`` (the next steps) and keep those whose step is a multiple of the stride."""
+        if not len(rows):
             return
-        if self._count == len(self._rows):
-            self._make_room()
-        self._rows[self._count] = (t, *state, *reference_position, reference_yaw, *forces, *controls,
-                                   *surfaces, *equivalent, *corrective)
-        self._count += 1
+        self.sums.add_rows(rows)
+        base, self._taken = self._taken, self._taken + len(rows)
+        i = (-base) % self.stride                      # the first of ``rows`` to keep
+        while i < len(rows):
+            if self._count == len(self._rows):
+                self._make_room()
+                i += (-(base + i)) % self.stride       # the next multiple of a doubled stride
+                continue
+            picked = rows[i::self.stride][:len(self._rows) - self._count]
+            self._rows[self._count:self._count + len(picked)] = picked
+            self._count += len(picked)
+            i += len(picked) * self.stride
 
     def _make_room(self) -> None:
         if len(self._rows) < self.max_rows:      # grow up to max_rows
-            grown = np.empty((min(2 * len(self._rows), self.max_rows), _WIDTH))
+            grown = np.empty((min(2 * len(self._rows), self.max_rows), WIDTH))
             grown[:self._count] = self._rows[:self._count]
             self._rows = grown
             return
@@ -222,6 +291,7 @@ class FlightLog:
     def flight(self, params: VehicleParams, **about) -> Flight:
         """The flight so far (copies of the rows); ``about``: label, path, custom_data, warnings, ended_early,
         summary (see :class:`Flight`). ValueError if no step was added."""
+        self._flush()
         if not self._count:
             raise ValueError('no control step was recorded')
         rows = self._rows[:self._count]
