@@ -24,11 +24,9 @@ from typing import Sequence
 import numpy as np
 
 from quad_msgs_bridge.bag.flight_bag import recorded_failure
-from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.mixer import CONTROL_NAMES
-from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, FlightRecord, TrackingStatistics,
-                                             flight_metrics, has_fuzzy_term, metrics_from_statistics,
-                                             rotor_at_limit)
+from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, BlockStatistics, FlightRecord,
+                                             flight_metrics, has_fuzzy_term, metrics_from_statistics)
 from quad_msgs_bridge.state import PSI, STATE_NAMES, STATE_SIZE
 from quad_msgs_bridge.vehicle_params import VehicleParams
 
@@ -143,49 +141,21 @@ class StepSums:
     :class:`FlightLog` keeps them: the SERIES side by side, in step order)."""
 
     def __init__(self, settle_time: float, f_min: float, f_max: float, share_window: float = SHARE_WINDOW):
-        self.settle_time, self.share_window, self.f_min, self.f_max = settle_time, share_window, f_min, f_max
-        self.steps = self.settled_steps = self.saturated_steps = self.saturated_settled_steps = 0
-        self.squared_error_sum = self.max_error = self.squared_yaw_error_sum = 0.0
-        self.variation = np.zeros(4)
+        self.settle_time, self.share_window = settle_time, share_window
+        self.statistics = BlockStatistics(settle_time, f_min, f_max)
         self.all_finite = True
-        self.first_time: float | None = None
-        self.last_time = self.first_settled_time = self.last_settled_time = 0.0
-        self._last_settled_controls: np.ndarray | None = None
         #: fuzzy share window k (steps with k <= (t - first time) / share_window < k + 1) -> per subsystem
         #: (sum |corrective|, sum |equivalent| + |corrective|)
         self.shares: dict[int, np.ndarray] = {}
 
     def add_rows(self, rows: np.ndarray) -> None:
         """The next control steps, one row each (at least one)."""
-        t = rows[:, _SLICES['time'].start]
-        position, yaw = rows[:, _SLICES['state']][:, :3], rows[:, _SLICES['state'].start + PSI]
-        forces, controls = rows[:, _SLICES['forces']], rows[:, _SLICES['controls']]
-        if self.first_time is None:
-            self.first_time = float(t[0])
-        self.last_time = float(t[-1])
-        self.steps += len(t)
-        at_limit = rotor_at_limit(forces.T, self.f_min, self.f_max)
-        self.saturated_steps += int(at_limit.sum())
-        self.all_finite = self.all_finite and bool(np.isfinite(forces).all() and np.isfinite(position).all())
-        settled = t >= self.first_time + self.settle_time
-        if settled.any():
-            error = position[settled] - rows[settled, _SLICES['reference_position']]
-            squared = (error * error).sum(axis=1)
-            yaw_error = wrap_angle(yaw[settled] - rows[settled, _SLICES['reference_yaw'].start])
-            settled_controls = controls[settled]
-            if self._last_settled_controls is None:
-                self.first_settled_time = float(t[settled][0])
-            else:
-                settled_controls = np.vstack((self._last_settled_controls, settled_controls))
-            self.variation = self.variation + np.abs(np.diff(settled_controls, axis=0)).sum(axis=0)
-            self._last_settled_controls = settled_controls[-1].copy()
-            self.settled_steps += int(settled.sum())
-            self.squared_error_sum += float(squared.sum())
-            self.max_error = max(self.max_error, float(np.sqrt(squared.max())))
-            self.squared_yaw_error_sum += float((yaw_error * yaw_error).sum())
-            self.saturated_settled_steps += int(at_limit[settled].sum())
-            self.last_settled_time = float(t[settled][-1])
-        windows = ((t - self.first_time) // self.share_window).astype(np.int64)
+        t, state = rows[:, _SLICES['time'].start], rows[:, _SLICES['state']]
+        forces = rows[:, _SLICES['forces']]
+        self.statistics.add(t, state[:, :3], state[:, PSI], rows[:, _SLICES['reference_position']],
+                            rows[:, _SLICES['reference_yaw'].start], forces, rows[:, _SLICES['controls']])
+        self.all_finite = self.all_finite and bool(np.isfinite(forces).all() and np.isfinite(state[:, :3]).all())
+        windows = ((t - self.statistics.first_time) // self.share_window).astype(np.int64)
         fuzzy = np.abs(rows[:, _SLICES['corrective']])
         total = np.abs(rows[:, _SLICES['equivalent']]) + fuzzy
         for window in np.unique(windows):
@@ -194,15 +164,6 @@ class StepSums:
             sums[0] += fuzzy[inside].sum(axis=0)
             sums[1] += total[inside].sum(axis=0)
 
-    def statistics(self) -> TrackingStatistics:
-        return TrackingStatistics(
-            steps=self.steps, settled_steps=self.settled_steps, squared_error_sum=self.squared_error_sum,
-            max_error=self.max_error, squared_yaw_error_sum=self.squared_yaw_error_sum,
-            variation=tuple(float(v) for v in self.variation),
-            settled_span=self.last_settled_time - self.first_settled_time, saturated_steps=self.saturated_steps,
-            saturated_settled_steps=self.saturated_settled_steps, first_time=self.first_time,
-            last_time=self.last_time)
-
     def fuzzy_share(self) -> dict[str, list[float]]:
         """As :func:`~quad_msgs_bridge.review.metrics.fuzzy_share`, from the sums."""
         ordered = [self.shares[k] for k in sorted(self.shares)]
@@ -210,7 +171,7 @@ class StepSums:
                 for i, name in enumerate(SUBSYSTEMS)}
 
     def metrics(self, fuzzy_term: bool, ended_early: bool, arm_length: float | None = None) -> dict:
-        return metrics_from_statistics(self.statistics(), self.settle_time, self.all_finite,
+        return metrics_from_statistics(self.statistics.statistics(), self.settle_time, self.all_finite,
                                        self.fuzzy_share() if fuzzy_term else None, self.share_window,
                                        ended_early=ended_early, arm_length=arm_length)
 
