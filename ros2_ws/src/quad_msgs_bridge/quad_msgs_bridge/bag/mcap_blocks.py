@@ -52,9 +52,10 @@ class MessageBlock:
     size: np.ndarray
 
     def rows(self, channel_id: int) -> np.ndarray:
-        """The data of ``channel_id``'s messages as rows of an (N, size) uint8 array; UnsupportedLayout when
-        they differ in size (their layout is not fixed)."""
-        mine = self.channel == channel_id
+        """The data of ``channel_id``'s messages as rows of an (N, size) uint8 array, in log-time order;
+        UnsupportedLayout when they differ in size (their layout is not fixed)."""
+        mine = np.flatnonzero(self.channel == channel_id)
+        mine = mine[np.argsort(self.log_time[mine], kind='stable')]      # in log-time order, as a bag is read
         starts, sizes = self.start[mine], self.size[mine]
         if not len(starts):
             return np.empty((0, 0), dtype=np.uint8)

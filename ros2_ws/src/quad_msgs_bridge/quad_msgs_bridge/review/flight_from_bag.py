@@ -301,6 +301,8 @@ def _read_blocks(path: Path, bag: Path, namespace: str | None, params: VehiclePa
     UnsupportedLayout or LayoutMismatch when the file or its messages are not in the layout that allows it."""
     connections, start, end = mcap_channels(path)
     found = _topic_connections(connections, namespace, bag)
+    if any(len(matches) > 1 for matches in found.values()):
+        raise UnsupportedLayout('a topic on several channels: their messages interleave by time')
     if settle_time is None:
         settle_time = default_settle_time((end - start) / 1e9)
     log = FlightLog(float(settle_time), params.F_min, params.F_max)
