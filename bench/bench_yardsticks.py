@@ -15,7 +15,8 @@
 
 The yardsticks are this file's own arithmetic of eq. (1) (the stack's kernels are not used), so
 they cost the same whatever the stack does: they turn figures from a busy, shared machine into
-ratios that compare between runs.
+ratios that compare between runs. Each is taken just before and just after the thing it measures
+(the mean of the two).
 
 ``--root`` (repeatable) names a checkout whose code is measured (default: this one); each
 measurement runs in a fresh process importing that checkout, the checkouts taken in turns, so
@@ -152,10 +153,12 @@ def measure_single(duration: float) -> dict:
     params, disturbances = load_vehicle_file()
     gains = load_gains()
     fly_embedded('nnit2fsmc', make_scenario('paper', 0.1), params, disturbances, gains, 0.1, 1000.0)  # compile
+    steps = round(duration * 1000)
+    before = plain_float_rk4(steps)
     result = fly_embedded('nnit2fsmc', make_scenario('paper', duration), params, disturbances, gains, duration,
                           1000.0)
     flight_rate = result.steps / result.wall_time_s
-    yardstick = plain_float_rk4(result.steps)
+    yardstick = 0.5 * (before + plain_float_rk4(steps))     # taken just before and just after the flight
     return {'steps_per_s': flight_rate, 'rtf': duration / result.wall_time_s, 'yardstick_steps_per_s': yardstick,
             'ratio': flight_rate / yardstick}
 
@@ -168,15 +171,17 @@ def measure_campaign(flights: int, duration: float) -> dict:
         return parse_spec({'scenario': 'paper', 'duration': duration, 'settle_time': min(5.0, duration / 2),
                            'controllers': ['nnit2fsmc'], 'flights': flights, 'seed': 1, 'control_rate_hz': 1000})
     spec = spec_of(flights, duration)
+    yardstick_steps = max(50, min(2000, round(4_000_000 / flights)))
     with tempfile.TemporaryDirectory() as folder:
         # numba's cache filled first (a user's second campaign): a first run after an edit compiles for minutes
         run_campaign(spec_of(2, 0.2), Path(folder) / 'warm-up', RunOptions(progress=False))
+        before = numpy_rk4(flights, yardstick_steps)
         started = time.perf_counter()
         run_campaign(spec, Path(folder) / 'campaign', RunOptions(progress=False))
         wall = time.perf_counter() - started
     vehicle_steps = flights * round(duration * 1000)
     rate = vehicle_steps / wall
-    yardstick = numpy_rk4(flights, max(50, min(2000, round(4_000_000 / flights))))
+    yardstick = 0.5 * (before + numpy_rk4(flights, yardstick_steps))     # just before and just after
     return {'wall_s': wall, 'vehicle_steps_per_s': rate, 'yardstick_vehicle_steps_per_s': yardstick,
             'ratio': rate / yardstick}
 
