@@ -20,7 +20,7 @@ import numpy as np
 from rosbags.highlevel import AnyReader, AnyReaderError
 from tqdm import tqdm
 
-from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, recorded_failure, vehicle_custom_data
+from quad_msgs_bridge.bag.flight_bag import recorded_failure, vehicle_custom_data
 from quad_msgs_bridge.bag.mcap_blocks import MessageBlock, UnsupportedLayout, message_blocks
 from quad_msgs_bridge.bag.mcap_blocks import channels as mcap_channels
 from quad_msgs_bridge.bag.reader import BagReadError, check_bag_path, is_finalized, mcap_file, read_custom_data
@@ -32,11 +32,14 @@ from quad_msgs_bridge.conversions import (DIAGNOSTIC_QUANTITIES, controls_from_w
 from quad_msgs_bridge.fast_cdr import (LayoutMismatch, decode_multi_array_rows, decode_odometry_rows,
                                        decode_stamped_floats_rows)
 from quad_msgs_bridge.frames import yaws_from_quaternions
-from quad_msgs_bridge.review.flight_data import Flight, FlightLog
+from quad_msgs_bridge.review.flight_data import MAX_ROWS, Flight, FlightLog
 from quad_msgs_bridge.review.metrics import FlightRecord, default_settle_time, flight_metrics, has_fuzzy_term
+from quad_msgs_bridge.review.verdict import ending
 from quad_msgs_bridge.state import state_from_odometry, states_from_odometry_rows
 from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
+#: FlightLog rows that no flight reaches: every control step kept
+EVERY_STEP = 1 << 62
 #: the topics a flight record needs
 NEEDED_TOPICS = (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS)
 #: read when present: the true state of a flight whose odometry carries sensor noise
@@ -56,10 +59,17 @@ class BagFlight:
     settle_time: float            #: [s]
     custom_data: dict             #: the bag's custom data (controller, scenario, disturbances, ...)
     warnings: list = field(default_factory=list)
-    #: the flight failed and ended there (known for a flight just flown, and from a bag that records its
-    #: failure): if that was before two settled steps its tracking figures are NaN, as in its summary,
-    #: rather than a too-short flight refused
+    #: the flight ended before its planned length (it failed, known for a flight just flown and from a bag
+    #: that records its failure; or it was interrupted, or its bag cut short): if that was before two settled
+    #: steps its tracking figures are NaN, as in its summary, rather than a too-short flight refused
     ended_early: bool = False
+
+    @property
+    def ending(self) -> str | None:
+        """Why and where the flight ended before its planned length; None if it did not (see
+        :attr:`quad_msgs_bridge.review.flight_data.Flight.ending`)."""
+        time = self.record.time
+        return ending(self.custom_data, float(time[-1]), float(time[-1] - time[0]) / max(len(time) - 1, 1))
 
     @property
     def failure(self) -> tuple[str, float] | None:
@@ -161,14 +171,14 @@ def _topic_connections(connections, namespace: str | None, bag: Path) -> dict:
 
 
 def _read_steps(bag: Path, namespace: str | None, params: VehicleParams, settle_time: float | None,
-                warnings: list) -> FlightLog:
-    """The bag's control steps in a FlightLog (bounded memory), message by message (any rosbag2 storage); the
-    settle time [s] None: the default one for the bag's span."""
+                warnings: list, max_rows: int = MAX_ROWS) -> FlightLog:
+    """The bag's control steps in a FlightLog of ``max_rows`` rows, message by message (any rosbag2 storage);
+    the settle time [s] None: the default one for the bag's span."""
     with AnyReader([bag], default_typestore=jazzy_typestore()) as reader:
         found = _topic_connections(reader.connections, namespace, bag)
         if settle_time is None:
             settle_time = default_settle_time((reader.end_time - reader.start_time) / 1e9)
-        log = FlightLog(float(settle_time), params.F_min, params.F_max)
+        log = FlightLog(float(settle_time), params.F_min, params.F_max, max_rows)
         steps = _StepPairing(log, use_truth=any(c.msgcount for c in found[GROUND_TRUTH]))
         role = {c.id: spec for spec, connections in found.items() for c in connections}
         for connection, _, raw in reader.messages(connections=[c for cs in found.values() for c in cs]):
@@ -296,7 +306,7 @@ PROGRESS_BYTES = 64 << 20
 
 
 def _read_blocks(path: Path, bag: Path, namespace: str | None, params: VehicleParams, settle_time: float | None,
-                 warnings: list, progress: bool | None) -> FlightLog:
+                 warnings: list, progress: bool | None, max_rows: int = MAX_ROWS) -> FlightLog:
     """:func:`_read_steps` of the finalized MCAP file ``path`` of ``bag``, decoded many messages at once;
     UnsupportedLayout or LayoutMismatch when the file or its messages are not in the layout that allows it."""
     connections, start, end = mcap_channels(path)
@@ -305,7 +315,7 @@ def _read_blocks(path: Path, bag: Path, namespace: str | None, params: VehiclePa
         raise UnsupportedLayout('a topic on several channels: their messages interleave by time')
     if settle_time is None:
         settle_time = default_settle_time((end - start) / 1e9)
-    log = FlightLog(float(settle_time), params.F_min, params.F_max)
+    log = FlightLog(float(settle_time), params.F_min, params.F_max, max_rows)
     steps = _BlockPairing(log, any(c.msgcount for c in found[GROUND_TRUTH]), params.d)
     size = path.stat().st_size
     shown = size > PROGRESS_BYTES if progress is None else progress
@@ -326,13 +336,14 @@ def fleet_namespaces(bag: str | Path) -> list[str]:
 
 
 def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: str | Path | None = None,
-                settle_time: float | None = None, progress: bool | None = None) -> Flight:
+                settle_time: float | None = None, every_step: bool = False, progress: bool | None = None) -> Flight:
     """The flight recorded in ``bag`` (a :class:`~quad_msgs_bridge.review.flight_data.Flight`, the object
     ``flight_stack.api.fly`` returns); raises BagReadError if it lacks what a flight needs.
 
     ``namespace``, ``vehicle_file`` and ``settle_time`` [s] override what the bag says; without a
     settle time in either, :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the bag's
-    span. Memory stays bounded however long the flight: an MCAP bag of one file (ours, ``ros2 bag
+    span. Memory stays bounded however long the flight, unless ``every_step`` keeps a row for every control
+    step (no thinning, see flight_data: about 0.5 kB per step): an MCAP bag of one file (ours, ``ros2 bag
     record -s mcap``) is read a block of chunks at a time, each block's messages decoded together as arrays
     (where a topic's messages share one layout; else, and for other storage, message by message). With
     ``progress`` (None: for a bag file over PROGRESS_BYTES) a progress bar on stderr shows the bytes read.
@@ -351,17 +362,20 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     if settle_time is None and custom.get('settle_time_s'):
         settle_time = float(custom['settle_time_s'])
     try:
+        max_rows = EVERY_STEP if every_step else MAX_ROWS
         log = None
         if has_mcap and (bag.is_file() or len(list(bag.glob('*.mcap'))) == 1):
             try:
-                log = _read_blocks(mcap_file(bag), bag, namespace, params, settle_time, warnings, progress)
+                log = _read_blocks(mcap_file(bag), bag, namespace, params, settle_time, warnings, progress, max_rows)
             except (UnsupportedLayout, LayoutMismatch):
                 pass          # read message by message instead
         if log is None:
-            log = _read_steps(bag, namespace, params, settle_time, warnings)
+            log = _read_steps(bag, namespace, params, settle_time, warnings, max_rows)
     except AnyReaderError as error:
         raise BagReadError(f'{bag}: not readable as a bag: {error}') from error
     if not log.steps:
         raise BagReadError(f'{bag}: no complete control step')
-    return log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
-                      warnings=warnings, ended_early=FAILURE_KEY in custom)
+    flight = log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
+                        warnings=warnings)
+    flight.ended_early = flight.ending is not None
+    return flight
