@@ -55,6 +55,7 @@ class RunOptions:
     progress: bool = True
     vehicle_file: str | None = None
     gains_file: str | None = None
+    report: bool = True                 #: write report.html (with its plots) beside campaign.json
 
     def worker_count(self) -> int:
         """The local worker processes to use; ParameterError on an invalid --workers or --batch-size."""
@@ -311,7 +312,7 @@ def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers
         flights.close()
         pool.close(cancel=cancelled)
     wall = time.perf_counter() - started
-    summary_path = write_results(spec, out_dir, wall_time_s=wall, vehicle_steps=steps)
+    summary_path = write_results(spec, out_dir, wall_time_s=wall, vehicle_steps=steps, report=options.report)
     return CampaignOutcome(total, wall, steps, summary_path)
 
 
@@ -334,8 +335,8 @@ def _progress_bar(total: int, already: int, enabled: bool):
 
 
 def write_results(spec: CampaignSpec, out_dir: Path, wall_time_s: float | None = None,
-                  vehicle_steps: int | None = None) -> Path:
-    """campaign.json (and report.html) from every row of flights.csv."""
+                  vehicle_steps: int | None = None, report: bool = True) -> Path:
+    """campaign.json (and, with ``report``, report.html) from every row of flights.csv."""
     rows = read_flights(out_dir / FLIGHTS_FILE)
     document = {
         'spec': spec.to_mapping(),
@@ -349,6 +350,7 @@ def write_results(spec: CampaignSpec, out_dir: Path, wall_time_s: float | None =
     }
     path = out_dir / SUMMARY_FILE
     path.write_text(json.dumps(document, indent=2) + '\n')
-    from .report import write_report
-    write_report(rows, document, out_dir)
+    if report:
+        from .report import write_report
+        write_report(rows, document, out_dir)
     return path
