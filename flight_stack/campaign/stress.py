@@ -134,7 +134,8 @@ def snap(value: float, resolution: float) -> float:
 
 def find_breaking_point(rate_at: Callable[[float], Tally], low: float, high: float,
                         resolution: float) -> BreakingPoint:
-    """Bisect [low, high] for the intensity where ``rate_at(x)`` falls below 90 %, to ``resolution``."""
+    """Bisect [low, high] for the intensity where ``rate_at(x)`` falls below 90 %, to ``resolution``; the
+    intensities tried lie on the grid low + k resolution (and at ``high``)."""
     if not low < high or resolution <= 0.0:
         raise ParameterError(f'stress range: need low < high and resolution > 0 (got {low:g}, {high:g}, '
                              f'{resolution:g})')
@@ -149,8 +150,9 @@ def find_breaking_point(rate_at: Callable[[float], Tally], low: float, high: flo
         return BreakingPoint('at_or_below_low', math.nan, low, tries)
     if tried(high).holds:
         return BreakingPoint('above_range', high, math.nan, tries)
+    start = low
     while high - low > resolution * (1.0 + 1e-9):
-        middle = snap(0.5 * (low + high), resolution)
+        middle = start + snap(0.5 * (low + high) - start, resolution)
         if not low < middle < high:
             break
         if tried(middle).holds:
@@ -268,8 +270,9 @@ def plot_success(setup: StressSetup, results: dict[str, BreakingPoint]) -> Path 
     for controller, point in results.items():
         xs = sorted(point.tries)
         shares = [point.tries[x].share for x in xs]
-        below = [share - point.tries[x].interval[0] for x, share in zip(xs, shares)]
-        above = [point.tries[x].interval[1] - share for x, share in zip(xs, shares)]
+        # the interval's ends as distances from the share (rounding may put an end a hair past it)
+        below = [max(0.0, share - point.tries[x].interval[0]) for x, share in zip(xs, shares)]
+        above = [max(0.0, point.tries[x].interval[1] - share) for x, share in zip(xs, shares)]
         axes.errorbar(xs, shares, yerr=[below, above], marker='o', capsize=3, label=controller)
     axes.axhline(BREAKING_SHARE, color='grey', linestyle='--', linewidth=1, label=f'{BREAKING_SHARE:.0%}')
     axes.set_xlabel(setup.kind.intensity)
@@ -290,3 +293,14 @@ def resolution_for(kind: DisturbanceKind, spec: CampaignSpec, options: RunOption
         return kind.resolution
     control_dt = CampaignSetup.of(spec, options.vehicle_file, options.gains_file).control_dt
     return max(1, round(kind.resolution / control_dt)) * control_dt
+
+
+def highest_intensity(kind: DisturbanceKind, spec: CampaignSpec, options: RunOptions, resolution: float) -> float:
+    """The highest intensity a try can fly: for the mass, the last grid point below the rotors' hover
+    limit (a true vehicle the four rotors cannot hold up at full thrust, 4 F_max <= m g, is refused as a
+    vehicle, not flown); the kind's range elsewhere."""
+    if kind.name != 'mass':
+        return math.inf
+    nominal = CampaignSetup.of(spec, options.vehicle_file, options.gains_file).nominal
+    ratio = 4.0 * nominal.F_max / (nominal.m * nominal.g)
+    return math.ceil(ratio / resolution - 1.0) * resolution

@@ -101,7 +101,7 @@ def stress_main(argv: list[str]) -> int:
                         help='stop bisecting when the bracket is this narrow (default: the kind\'s)')
     args = parser.parse_args(argv)
     from .spec import load_spec
-    from .stress import StressSetup, describe, resolution_for, snap, stress
+    from .stress import StressSetup, describe, highest_intensity, resolution_for, snap, stress
     kind = KINDS[args.kind]
     try:
         spec = load_spec(args.spec).overridden(flights=args.flights, duration=args.duration,
@@ -112,6 +112,12 @@ def stress_main(argv: list[str]) -> int:
             raise ParameterError(f'--resolution: {resolution:g} must be > 0')
         low = snap(kind.low if args.low is None else args.low, resolution)
         high = snap(kind.high if args.high is None else args.high, resolution)
+        limit = highest_intensity(kind, spec, options, resolution)
+        if high > limit:
+            if args.high is not None:
+                raise ParameterError(f'--high: {high:g} is above what a {kind.name} try can fly ({limit:g}: the '
+                                     'rotors cannot hover a heavier vehicle)')
+            high = limit
         if not low < high:
             raise ParameterError(f'--low, --high: need low < high on the grid of {resolution:g} (got {low:g}, {high:g})')
         setup = StressSetup(spec, kind, spec.controllers, args.out, options, low, high, resolution)

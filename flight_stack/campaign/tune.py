@@ -128,9 +128,14 @@ def open_study(setup: TuneSetup):
     from optuna.storages import JournalStorage
     from optuna.storages.journal import JournalFileBackend
     storage = JournalStorage(JournalFileBackend(str(setup.out_dir / STUDY_FILE)))
+    name = f'tune-{setup.kind}'
+    existing = {summary.study_name: summary.n_trials for summary in optuna.get_all_study_summaries(storage)}
+    # the sampler's seed moves on by the trials already made, so a resumed study does not draw its
+    # random start again (a fresh sampler with the same seed would propose the same points)
     study = optuna.create_study(
-        study_name=f'tune-{setup.kind}', storage=storage, direction='minimize', load_if_exists=True,
-        sampler=optuna.samplers.TPESampler(seed=setup.sampler_seed, n_startup_trials=STARTUP_TRIALS),
+        study_name=name, storage=storage, direction='minimize', load_if_exists=True,
+        sampler=optuna.samplers.TPESampler(seed=setup.sampler_seed + existing.get(name, 0),
+                                           n_startup_trials=STARTUP_TRIALS),
         pruner=optuna.pruners.MedianPruner(n_startup_trials=STARTUP_TRIALS, n_warmup_steps=0))
     identity = setup.identity()
     stored = study.user_attrs.get('identity')
