@@ -178,3 +178,15 @@ def test_stress_runs_on_a_tiny_real_campaign(scheduler, tmp_path):
         low, high = wilson_interval(int(row['successes']), int(row['flights']))
         assert (float(row['wilson95_low']), float(row['wilson95_high'])) == pytest.approx((low, high))
     assert (tmp_path / 'stress-mass.png').stat().st_size > 0
+
+
+@pytest.mark.parametrize('vehicle, message', [
+    ({'mass': {'dist': 'fixed', 'value': -1.0}}, r'vehicle.mass.value: .*\(-1.0, inf'),
+    ({'mass': {'dist': 'fixed'}}, 'vehicle.mass.value: missing'),
+    ({'one_rotor_efficiency_loss': {'dist': 'fixed', 'value': -0.1}}, 'a loss is a fraction'),
+    ({'one_rotor_efficiency_loss': {'dist': 'fixed', 'value': 1.0}}, 'cannot lose all of its thrust'),
+    ({'mass': {'dist': 'constant', 'value': 0.2}}, 'uniform, normal, fixed'),
+])
+def test_a_fixed_value_the_vehicle_cannot_take_is_refused_naming_the_key(vehicle, message):
+    with pytest.raises(ParameterError, match=message):
+        parse_spec({**DOCUMENT, 'vehicle': vehicle})
