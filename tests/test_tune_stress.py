@@ -190,3 +190,19 @@ def test_stress_runs_on_a_tiny_real_campaign(scheduler, tmp_path):
 def test_a_fixed_value_the_vehicle_cannot_take_is_refused_naming_the_key(vehicle, message):
     with pytest.raises(ParameterError, match=message):
         parse_spec({**DOCUMENT, 'vehicle': vehicle})
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['tune', '--controller', 'pid', '--trials', '2', '--seeds', '1,x'], '--seeds'),
+    (['tune', '--controller', 'smc-sign', '--trials', '2'], 'no search space'),
+    (['tune', '--controller', 'pid', '--trials', '0'], '--trials'),
+    (['stress', '--kind', 'mass', '--high', '2.5'], '--high: 2.5 is above'),
+    (['stress', '--kind', 'wind', '--low', '5', '--high', '5'], '--low, --high'),
+])
+def test_the_commands_refuse_bad_options_before_flying(tmp_path, capsys, argv, message):
+    from flight_stack.cli import run
+    spec = tmp_path / 'spec.yaml'
+    spec.write_text(yaml.safe_dump(DOCUMENT))
+    assert run([*argv, str(spec), '--out', str(tmp_path / 'out')]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / 'out').exists()
