@@ -30,13 +30,14 @@ left out means no such perturbation; other tools write these files, so the names
                                # (common.measurement_filter_hz, common.velocity_filter_hz); false: none
 
 ``inertia`` draws Ix, Iy and Iz on their own. A distribution is a number (relative uniform half
-width), ``{dist: uniform, half_width: x}``, ``{dist: normal, std: s}`` or ``{dist: fixed, value: v}``
-(every flight the same: for a relative key the true value is (1 + v) times the nominal one, v > -1);
-relative draws must keep a parameter positive (half width < 1, 3 std < 1). ``wind`` takes an optional ``direction_deg`` (the
-direction the wind blows towards, from +x (east) counter-clockwise; default: drawn uniformly per
-flight). ``sensor_noise`` entries are white-noise standard deviations, or ``{std: s, bias_std: b}``
-with a constant bias drawn per flight from N(0, b^2). An unknown key, a negative standard deviation,
-an empty controller list or ``flights: 0`` is refused before anything flies, naming the key.
+width), ``{dist: uniform, half_width: x}``, ``{dist: normal, std: s}`` or ``{dist: fixed, value:
+v}`` (every flight the same: for a relative key the true value is (1 + v) times the nominal one, v >
+-1); relative draws must keep a parameter positive (half width < 1, 3 std < 1). ``wind`` takes an
+optional ``direction_deg`` (the direction the wind blows towards, from +x (east) counter-clockwise;
+default: drawn uniformly per flight). ``sensor_noise`` entries are white-noise standard deviations,
+or ``{std: s, bias_std: b}`` with a constant bias drawn per flight from N(0, b^2). An unknown key, a
+negative standard deviation, an empty controller list or ``flights: 0`` is refused before anything
+flies, naming the key.
 """
 from __future__ import annotations
 

@@ -119,7 +119,8 @@ def stress_main(argv: list[str]) -> int:
                                      'rotors cannot hover a heavier vehicle)')
             high = limit
         if not low < high:
-            raise ParameterError(f'--low, --high: need low < high on the grid of {resolution:g} (got {low:g}, {high:g})')
+            raise ParameterError(f'--low, --high: need low < high on the grid of {resolution:g} '
+                                 f'(got {low:g}, {high:g})')
         setup = StressSetup(spec, kind, spec.controllers, args.out, options, low, high, resolution)
         print(f'stress {kind.name} ({kind.intensity}) in [{low:g}, {high:g}] to {resolution:g}: '
               f'{", ".join(spec.controllers)}, {spec.flights} flights of {spec.duration:g} s per try -> {args.out}',

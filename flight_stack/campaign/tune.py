@@ -9,10 +9,12 @@ each seed's campaign. The first trial is the gains the tuning starts from (the p
 ``--gains``), flown on every seed and never pruned, so the best trial is never worse than they are
 on the same flights.
 
-The objective (:func:`objective`), in metres, smaller is better: over every tuning flight, the median
-of the position RMSE, where a flight that failed counts as ``max_error_m`` (no finished flight is
-worse: its error stayed below it after settling); if fewer than 99 % of the flights finished, it is
-``max_error_m * (2 - finished share)`` instead, which is worse than any gains that finish 99 %.
+The objective (:func:`objective`), in metres, smaller is better: over every tuning flight, the median of
+the position RMSE, where a flight that failed counts as ``max_error_m`` (no finished flight is worse:
+its error stayed below it after settling); if fewer than 99 % of the flights finished, it is
+``max_error_m * (2 - finished share)`` instead, which is worse than any gains that finish 99 %. A point
+whose gains the controller refuses for the nominal vehicle scores ``2 max_error_m``, as bad as gains
+whose every flight fails.
 """
 from __future__ import annotations
 
@@ -21,7 +23,6 @@ import hashlib
 import json
 import math
 import sys
-import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -33,6 +34,7 @@ from nnit2fsmc_controller.search_spaces import search_space, values_in, with_val
 from quad_msgs_bridge.vehicle_params import ParameterError
 
 from ..locking import FileLock
+from .batch import CampaignSetup
 from .results import FLIGHTS_FILE, read_flights
 from .runner import RunOptions, run_campaign
 from .spec import CampaignSpec
@@ -163,14 +165,22 @@ def trial_folder(setup: TuneSetup, values: dict) -> Path:
     return setup.out_dir / 'campaigns' / _digest({k: repr(float(v)) for k, v in values.items()})
 
 
+class RefusedGains(Exception):
+    """The controller refuses a point's gains for the nominal vehicle (e.g. too little authority)."""
+
+
 def fly_point(setup: TuneSetup, values: dict, after_seed=None) -> Score:
     """Fly the gains of ``values`` on every tuning seed (one campaign each, via the campaign runner) and
     score all their flights. ``after_seed(index, score_so_far, rows_so_far)`` runs after each seed's
-    campaign (pruning raises from it)."""
+    campaign (pruning raises from it). :class:`RefusedGains` if the controller refuses these gains."""
     folder = trial_folder(setup, values)
     folder.mkdir(parents=True, exist_ok=True)
     gains_path = folder / 'gains.yaml'
     gains_path.write_text(yaml.safe_dump(with_values(setup.starting_gains(), setup.kind, values), sort_keys=False))
+    try:
+        CampaignSetup.of(setup.spec, setup.options.vehicle_file, gains_path).check_controllers((setup.kind,))
+    except ParameterError as error:
+        raise RefusedGains(str(error)) from error
     options = replace(setup.options, gains_file=str(gains_path), progress=False, report=False)
     rows: list[dict] = []
     score = None
@@ -209,7 +219,11 @@ def make_objective(setup: TuneSetup):
                 trial.set_user_attr('pruned_because', 'worse than the median trial after the same seeds')
                 raise optuna.TrialPruned()
 
-        return fly_point(setup, values, after_seed).objective_m
+        try:
+            return fly_point(setup, values, after_seed).objective_m
+        except RefusedGains as error:     # scored as if every flight failed
+            trial.set_user_attr('refused', str(error))
+            return 2.0 * setup.spec.max_error_m
 
     return run
 
@@ -233,7 +247,8 @@ def trials_table(study, kind: str) -> list[dict]:
             'objective_m': trial.value if trial.value is not None else attrs.get('objective_m', math.nan),
             'median_rmse_m': attrs.get('median_rmse_m', math.nan),
             'finished': attrs.get('finished', ''), 'flights': attrs.get('flights', ''),
-            'seeds_flown': attrs.get('seeds_flown', 0), 'pruned_because': attrs.get('pruned_because', ''),
+            'seeds_flown': attrs.get('seeds_flown', 0),
+            'pruned_because': attrs.get('pruned_because', '') or attrs.get('refused', ''),
             'wall_time_s': duration,
             **{d.name: trial.params.get(d.name, math.nan) for d in search_space(kind)}})
     return rows
