@@ -11,7 +11,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError
 TUNE_DESCRIPTION = """Tune one controller kind on campaigns with Optuna (docs/TUNING.md): N trials, each the kind's
 gains flown on M flights of every tuning seed (the campaign runner: local workers or a Dask cluster).
 Objective: the median position RMSE over the tuning flights, a failed flight counted as max_error_m,
-and worse than any gains that finish 99 %% when fewer do. The first trial is the starting gains
+and worse than any gains that finish 99 % when fewer do. The first trial is the starting gains
 (packaged, or --gains). The study lives in DIR/study.journal: the same command again continues it.
 Writes DIR/gains-KIND.yaml (a --gains file) and DIR/trials-KIND.csv (every trial)."""
 
@@ -21,9 +21,9 @@ TUNE_EPILOG = """examples:
   python3 run_stack.py --controller pid --gains out/tune-pid/gains-pid.yaml"""
 
 STRESS_DESCRIPTION = """Find each controller's breaking point under one disturbance (docs/TUNING.md): the intensity
-at which the share of flights that finish with a position RMSE below 10 cm falls below 90 %%, by
+at which the share of flights that finish with a position RMSE below 10 cm falls below 90 %, by
 bisection over campaigns of SPEC with that disturbance fixed. Writes DIR/breaking_points.csv (a row
-per kind and controller), DIR/stress-KIND.csv (every intensity tried, with its 95 %% Wilson interval)
+per kind and controller), DIR/stress-KIND.csv (every intensity tried, with its 95 % Wilson interval)
 and DIR/stress-KIND.png. Intensities: {kinds}."""
 
 STRESS_EPILOG = """example:
