@@ -374,7 +374,7 @@ def test_allocation_changes_in_flight_and_the_integrals_are_kept():
     assert retuned.allocation == 'clip'
     assert [law.integral for law in retuned.laws.values()] == [law.integral for law in running.laws.values()]
     out = retuned.update(0.03, STATE, REFERENCE)
-    np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, VEHICLE.yaw_coefficient), atol=1e-15)
+    np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, VEHICLE.mixer), atol=1e-15)
 
 
 def test_every_text_gain_has_its_valid_values_for_the_ros_node():

@@ -187,7 +187,7 @@ def test_every_kind_builds_and_keeps_rotor_forces_within_limits(kind):
         out = controller.update(k * controller.dt, state, reference)
         assert set(out.axes) == set(AXES)     # per-subsystem diagnostics for the recording and the review
         assert all(PARAMS.F_min <= f <= PARAMS.F_max for f in out.forces)
-        np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, PARAMS.yaw_coefficient),
+        np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, PARAMS.mixer),
                                    atol=1e-15)
         assert all(math.isfinite(a.value) for a in out.axes.values())
 

@@ -100,9 +100,15 @@ def flights_to_fly(spec: CampaignSpec, done: set) -> int:
     return spec.flights * len(spec.controllers) - flown
 
 
+def holds_campaign(out_dir: Path) -> bool:
+    """Whether ``out_dir`` holds a campaign (begun or finished: one only ``resume`` continues)."""
+    return (out_dir / FLIGHTS_FILE).exists() or (out_dir / SPEC_FILE).exists()
+
+
 def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
     """ParameterError if ``out_dir`` cannot take this campaign (touches nothing): it is a file, or it holds a
-    campaign and ``resume`` is off, or it holds another spec's campaign."""
+    campaign and ``resume`` is off, or it holds another spec's campaign, or ``resume`` is on and it holds
+    no campaign (a mistyped path would otherwise start afresh)."""
     if out_dir.exists() and not out_dir.is_dir():
         raise ParameterError(f'--out: {out_dir} exists and is not a folder; choose another --out')
     base = out_dir
@@ -110,8 +116,11 @@ def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
         base = base.parent
     if not base.is_dir():
         raise ParameterError(f'--out: {base} is not a folder, so {out_dir} cannot be created')
-    flights_path, spec_path = out_dir / FLIGHTS_FILE, out_dir / SPEC_FILE
-    if flights_path.exists() or spec_path.exists():
+    spec_path = out_dir / SPEC_FILE
+    if resume and not holds_campaign(out_dir):
+        raise ParameterError(f'--resume: {out_dir} holds no campaign to resume (no {FLIGHTS_FILE}); check the path, '
+                             'or leave out --resume to start the campaign there')
+    if holds_campaign(out_dir):
         if not resume:
             raise ParameterError(f'--out: {out_dir} already holds a campaign; pass --resume (resume=True from '
                                  'Python) to fly only its missing flights, or choose another folder')

@@ -35,7 +35,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError
 
 from .batch import CampaignSetup
 from .results import FLIGHTS_FILE, read_flights, wilson_interval
-from .runner import RunOptions, run_campaign
+from .runner import RunOptions, holds_campaign, run_campaign
 from .spec import CampaignSpec, Distribution, NoiseLevel
 
 SUCCESS_RMSE_M = 0.10           #: a flight succeeds when it finishes with a position RMSE below this [m]
@@ -183,8 +183,7 @@ def fly_try(setup: StressSetup, controller: str, intensity: float) -> Tally:
     folder holds part of it)."""
     spec = replace(setup.kind.fixed(setup.spec, intensity), controllers=(controller,))
     folder = try_folder(setup, controller, intensity)
-    resume = (folder / FLIGHTS_FILE).exists()
-    run_campaign(spec, folder, replace(setup.options, resume=resume, progress=False, report=False))
+    run_campaign(spec, folder, replace(setup.options, resume=holds_campaign(folder), progress=False, report=False))
     return tally(read_flights(folder / FLIGHTS_FILE))
 
 

@@ -36,7 +36,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError
 from ..locking import FileLock
 from .batch import CampaignSetup
 from .results import FLIGHTS_FILE, read_flights
-from .runner import RunOptions, run_campaign
+from .runner import RunOptions, holds_campaign, run_campaign
 from .spec import CampaignSpec
 
 STUDY_FILE = 'study.journal'
@@ -186,8 +186,8 @@ def fly_point(setup: TuneSetup, values: dict, after_seed=None) -> Score:
     score = None
     for index, seed in enumerate(setup.seeds):
         campaign_dir = folder / f'seed-{seed}'
-        started = (campaign_dir / FLIGHTS_FILE).exists()
-        run_campaign(replace(setup.spec, seed=seed), campaign_dir, replace(options, resume=started))
+        run_campaign(replace(setup.spec, seed=seed), campaign_dir,
+                     replace(options, resume=holds_campaign(campaign_dir)))
         rows += read_flights(campaign_dir / FLIGHTS_FILE)
         score = objective(rows, setup.spec.max_error_m)
         if after_seed is not None:

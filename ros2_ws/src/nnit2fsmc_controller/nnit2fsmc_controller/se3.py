@@ -192,7 +192,7 @@ class SE3Controller:
         scale = (p.d, p.d, 1.0)                                  # U2 = M_x / d, U3 = M_y / d, U4 = M_z
         u2, u3, u4 = ((fb + mm) / s for fb, mm, s in zip(moment_feedback, moment_model, scale))
 
-        forces = allocate(self.allocation, thrust, u2, u3, u4, p.yaw_coefficient, p.F_min, p.F_max)
+        forces = allocate(self.allocation, thrust, u2, u3, u4, p.mixer, p.F_min, p.F_max)
         lam = self.lam
         axes = {a: AxisOutput(force[k] / p.m, ev[k] + lam[a] * ex[k], reference.acceleration[k],
                               force[k] / p.m - reference.acceleration[k])     # feedback, after the tilt limit
@@ -200,5 +200,5 @@ class SE3Controller:
         axes['z'] = AxisOutput(thrust, ev[2] + lam['z'] * ex[2], thrust - feedback[2], feedback[2])
         axes.update({a: AxisOutput(u, e_w[k] + lam[a] * e_r[k], mm / s, fb / s) for k, (a, u, fb, mm, s)
                      in enumerate(zip(attitude_axes, (u2, u3, u4), moment_feedback, moment_model, scale))})
-        return ControlOutput(forces=forces, controls=controls_from_forces(*forces, p.yaw_coefficient),
+        return ControlOutput(forces=forces, controls=controls_from_forces(*forces, p.mixer),
                              axes=axes, attitude_reference=desired)
