@@ -206,3 +206,11 @@ def test_the_commands_refuse_bad_options_before_flying(tmp_path, capsys, argv, m
     assert run([*argv, str(spec), '--out', str(tmp_path / 'out')]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / 'out').exists()
+
+
+def test_every_search_space_is_a_controller_kind():
+    from nnit2fsmc_controller.factory import CONTROLLERS
+    assert set(SEARCH_SPACES) <= set(CONTROLLERS)
+    assert {'nnit2fsmc', 'pid', 'se3', 'smc-integral'} <= set(SEARCH_SPACES)
+    # the same budget: every kind searches the same number of dimensions
+    assert len({len(space) for space in SEARCH_SPACES.values()}) == 1
