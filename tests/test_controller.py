@@ -72,7 +72,7 @@ def test_eq10_tilt_limit_keeps_the_direction(psi, height, tilt):
 @pytest.mark.parametrize('height, tilt', [(1.0, 0.8), (0.1, 0.6)])
 def test_every_controller_asks_for_the_tilt_limit_of_its_height(kind, height, tilt):
     """50 m off in x and y: the controller asks for the largest tilt, the limit at the vehicle's height (above the
-    NNIT2FSMC's take-off height of 0.05 m, so its x, y laws act). (The paper-style SMCs' switching gain,
+    take-off height of 0.05 m every kind shares, so the x, y laws act). (The paper-style SMCs' switching gain,
     0.3 m/s^2, never reaches the limit.)"""
     far = ReferenceSample((50.0, 50.0, height), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
     out = build_controller(kind, PARAMS, GAINS).update(0.0, [0.0, 0.0, height] + [0.0] * 9, far)

@@ -74,7 +74,7 @@ def gains_file(tmp_path: Path, old: str, new: str) -> str:
 BAD_SETTINGS = {   # the settings of issue 10 (and a few more) -> what the error must name
     'control_rate 0': (lambda tmp: ['--gains', gains_file(tmp, 'control_rate: 1000.0', 'control_rate: 0')],
                        'common.control_rate: 0.0 is outside the valid range (0.0, inf)'),
-    'negative learning_rate': (lambda tmp: ['--gains', gains_file(tmp, 'learning_rate: 0.9}', 'learning_rate: -0.9}')],
+    'negative learning_rate': (lambda tmp: ['--gains', gains_file(tmp, 'learning_rate: 0.9,', 'learning_rate: -0.9,')],
                                'nnit2fsmc.axes.x.learning_rate: -0.9 is outside the valid range [0.0, inf)'),
     'type_reducer kmx': (lambda tmp: ['--gains', gains_file(tmp, 'type_reducer: km ', 'type_reducer: kmx ')],
                          "type_reducer: 'kmx' is not one of km, nie-tan"),

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from flight_stack.api import CONTROLLERS, fly, load_vehicle
-from nnit2fsmc_controller.factory import ABLATIONS
 from quad_msgs_bridge.conversions import rosbags_kit, rotor_forces_msg
 from quad_msgs_bridge.mixer import forces_from_controls
 from quad_msgs_bridge.urdf import rotor_transforms_msg, vehicle_urdf
@@ -135,23 +134,14 @@ def test_an_x_vehicle_hovers_level_with_equal_rotor_forces(name, kind):
 
 
 # ---------------------------------------------------------------- every kind flies every shipped vehicle
-#: the NNIT2FSMC's packaged gains are forces in newtons for the paper's 0.486 kg vehicle: the network's output
-#: cap (10 N) is below the x500's weight (20.3 N), so it never takes off; the `gains` work of issue 28 restates
-#: them per unit of mass and inertia. strict: this test fails once they fly it, so the mark is then taken off
-PACKAGED_GAINS_CANNOT_LIFT = {('x500', kind) for kind in ('nnit2fsmc', *ABLATIONS)}
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize('name', SHIPPED)
 @pytest.mark.parametrize('kind', CONTROLLERS)
-def test_every_kind_flies_every_shipped_vehicle(request, name, kind):
+def test_every_kind_flies_every_shipped_vehicle(name, kind):
     """The packaged gains, the vehicle's own file (its section IV disturbances scaled to its mass and inertia):
     a hover flight takes off and holds still near the hover point, upright, with no failure. Near: within
     0.25 m, as `nnit2fsmc-nolearn` (no network learning) holds the paper's own vehicle 0.2 m low under the
     section IV bias forces; every other kind ends within 3 cm of it here."""
-    if (name, kind) in PACKAGED_GAINS_CANNOT_LIFT:
-        request.applymarker(pytest.mark.xfail(strict=True, reason='packaged gains in newtons: network cap below '
-                                                                  "the x500's weight (issue 28, gains)"))
     flight = fly(kind, 'hover', duration=8.0, vehicle=name)
     assert flight.summary.get('failure') is None
     end, two_seconds_before = flight.state[-1], flight.state[flight.time <= flight.time[-1] - 2.0][-1]

@@ -288,8 +288,8 @@ class CascadedController:
         (:class:`.estimation.MeasurementStage`, applied by the closed loop and the controller node).
 
         ``takeoff_height`` > 0 [m, world z; the ground is z = 0]: while a vehicle's (filtered) height is
-        not above it, the networks of HELD_ON_GROUND do not learn (the laws' ``learning`` flag; laws
-        without one are not affected) and the desired roll and pitch are 0 (the x, y laws' outputs are
+        not above it, the networks and integrators of HELD_ON_GROUND hold (the laws' ``learning`` flag; the
+        sliding-mode laws have no state to hold) and the desired roll and pitch are 0 (the x, y laws' outputs are
         replaced by a zero horizontal acceleration: level on the ground); 0: the laws act and learn
         from the first update (paper).
 
@@ -312,7 +312,7 @@ class CascadedController:
         self.attitude_rates = attitude_rates
         self.takeoff_height = check_number('takeoff_height', takeoff_height, 0.0)
         self._held_on_ground = ([laws[axis] for axis in HELD_ON_GROUND if hasattr(laws[axis], 'learning')]
-                                if self.takeoff_height > 0.0 else [])
+                                if self.takeoff_height > 0.0 else [])   #: the laws with a state to hold
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
 
     def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
@@ -326,7 +326,7 @@ class CascadedController:
         p = self.params
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         laws = self.laws
-        if self._held_on_ground:
+        if self.takeoff_height > 0.0:
             airborne = z > self.takeoff_height
             for law in self._held_on_ground:
                 law.learning = airborne
@@ -338,7 +338,7 @@ class CascadedController:
         out_z = laws['z'].update(z - zd, vz - vzd, vzd, azd, -p.g - p.Kfz * vz / p.m, cphi * ctheta / p.m)
 
         ax_cmd, ay_cmd = out_x.value, out_y.value
-        if self._held_on_ground:   # level on the ground: tilting cannot move it, and tips it over at lift-off
+        if self.takeoff_height > 0.0:   # level on the ground: tilting cannot move it, and tips it over at lift-off
             ax_cmd, ay_cmd = xp.where(airborne, ax_cmd, 0.0), xp.where(airborne, ay_cmd, 0.0)
         phi_d, theta_d = self.attitude_from_accelerations(ax_cmd, ay_cmd, psi, z)
         f = self._filters

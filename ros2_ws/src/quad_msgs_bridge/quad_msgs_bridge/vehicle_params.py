@@ -237,8 +237,9 @@ class VehicleParams:
         _require(self.F_max > self.F_min,
                  lambda i: f'vehicle.F_max: {_pick(self.F_max, i)} must exceed F_min = {_pick(self.F_min, i)}')
         _require(4.0 * self.F_max > weight,
-                 lambda i: f'vehicle.F_max: {_pick(self.F_max, i)} N cannot hover the vehicle; valid range '
-                           f'({_pick(weight, i) / 4.0}, inf)')
+                 lambda i: f'vehicle.F_max: {_pick(self.F_max, i)} N cannot hover the vehicle of mass m = '
+                           f'{_pick(self.m, i):g} kg (weight {_pick(weight, i):.4g} N): four rotors give '
+                           f'{4.0 * _pick(self.F_max, i):.4g} N; valid range ({_pick(weight, i) / 4.0}, inf)')
         _require(4.0 * self.F_min < weight,
                  lambda i: f'vehicle.F_min: {_pick(self.F_min, i)} N cannot descend; valid range '
                            f'[0, {_pick(weight, i) / 4.0})')
