@@ -4,9 +4,9 @@ search spaces are declared.
 A kind's space is a tuple of :class:`Dimension`: one searched number, the gains of the gains file
 (``config/controller.yaml``, dotted names) that all take its value, its range and unit. x and y share
 their gains (the helix and the campaigns are symmetric in x and y), so one dimension sets both.
-Every kind gets the same number of dimensions (six: three for x, y, three for z or two for z and one
-more for x, y), the horizontal and vertical position loops that the campaigns' wind and mass
-perturbations load; the attitude loops keep the packaged gains. Each range contains the packaged
+Every kind gets the same number of dimensions (six), chosen in the position loops that the campaigns'
+wind and mass perturbations load (and, for the adaptive kinds, their translational adaptation); the
+attitude loops keep the packaged gains. Each range contains the packaged
 value (so the packaged gains can be enqueued as the first trial) and spans it by about a decade on
 a log scale. Adding a kind is one entry of :data:`SEARCH_SPACES`.
 """
@@ -45,9 +45,9 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
         _xy('nnit2fsmc', 'input_scale', 0.3, 6.0, 'm/s (S at which the fuzzy input saturates)'),
         _xy('nnit2fsmc', 'fuzzy_gain', 2.0, 40.0, 'm/s^2'),
         _xy('nnit2fsmc', 'nn_gain', 1.0, 20.0, 'm/s^2'),
-        _xy('nnit2fsmc', 'learning_rate', 0.1, 10.0, '1/s'),
-        _z('nnit2fsmc', 'fuzzy_gain', 2.0, 40.0, 'N'),
-        _z('nnit2fsmc', 'learning_rate', 0.05, 5.0, '1/s'),
+        _xy('nnit2fsmc', 'learning_rate', 0.1, 10.0, '1/s per (m/s^2)^2'),
+        _z('nnit2fsmc', 'fuzzy_gain', 4.0, 80.0, 'm/s^2'),
+        _z('nnit2fsmc', 'learning_rate', 0.01, 1.0, '1/s per (m/s^2)^2'),
     ),
     'pid': (
         _xy('pid', 'kp', 2.0, 80.0, '1/s^2'),
@@ -72,6 +72,22 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
         _z('smc_integral', 'slope', 3.0, 40.0, '1/s'),
         _z('smc_integral', 'integral_gain', 0.2, 50.0, '1/s^2'),
         _z('smc_integral', 'switching_gain', 0.5, 20.0, 'm/s^2'),
+    ),
+    'l1-se3': (    # the se3 law it augments, and its L1 translational loop (the campaigns' wind and mass)
+        _xy('se3', 'k_error', 2.0, 80.0, '1/s^2'),
+        _xy('se3', 'k_integral', 1.0, 200.0, '1/s^3'),
+        _xy('se3', 'k_rate', 1.0, 20.0, '1/s'),
+        _z('se3', 'k_error', 10.0, 200.0, '1/s^2'),
+        Dimension('l1.predictor_pole_translation', ('l1_se3.predictor_pole_translation',), 0.5, 50.0, '1/s'),
+        Dimension('l1.cutoff_translation_hz', ('l1_se3.cutoff_translation_hz',), 0.5, 50.0, 'Hz'),
+    ),
+    'indi': (
+        _xy('indi', 'k_error', 2.0, 80.0, '1/s^2'),
+        _xy('indi', 'k_rate', 1.0, 20.0, '1/s'),
+        _z('indi', 'k_error', 10.0, 200.0, '1/s^2'),
+        _z('indi', 'k_rate', 3.0, 40.0, '1/s'),
+        Dimension('indi.acceleration_filter_hz', ('indi.acceleration_filter_hz',), 2.0, 60.0, 'Hz'),
+        Dimension('indi.effectiveness_rate', ('indi.effectiveness_rate',), 0.005, 0.5, '- (normalised LMS step)'),
     ),
 }
 
