@@ -23,7 +23,6 @@ failed vehicle of a batch is frozen and never poisons the others; a single vehic
 """
 from __future__ import annotations
 
-import contextlib
 from dataclasses import dataclass
 from typing import Callable, NamedTuple, Sequence
 
@@ -134,7 +133,7 @@ class ClosedLoop:
         batch = isinstance(simulator.state[0], np.ndarray)
         shape = simulator.state[0].shape if batch else ()
         #: a batch's diverging vehicle may overflow before it is frozen; plain floats never warn
-        self._quiet = (lambda: np.errstate(over='ignore', invalid='ignore')) if batch else contextlib.nullcontext
+        self._quiet = (lambda: np.errstate(over='ignore', invalid='ignore')) if batch else None
         #: failure code per vehicle: -1 while flying, else an index into FAILURES
         self.failure = np.full(shape, -1) if batch else -1
         #: [s] sim time at which each vehicle failed (nan while flying)
@@ -153,8 +152,13 @@ class ClosedLoop:
         t = sim.time
         truth = sim.state
         measured = truth if self.sensor_noise is None else self.sensor_noise.measure(truth)
-        with self._quiet():
-            received, observation = (measured, None) if self.observe is None else self.observe(t, measured)
+        if self.observe is None:
+            received, observation = measured, None
+        elif self._quiet is None:
+            received, observation = self.observe(t, measured)
+        else:
+            with self._quiet():
+                received, observation = self.observe(t, measured)
         xp = namespace_for(received[0])
         if not xp.all_finite(received):
             unreadable = xp.where(xp.finite_each(received), False, True)

@@ -206,10 +206,11 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
         # the state as the bag gives it back: the odometry read, or ground_truth/odom under sensor noise
         log.add(done.time, done.measured if truth_odometry is None else state_from_odometry(truth_odometry),
                 reference.position, reference.yaw, out.forces, out.controls, surfaces, equivalent, corrective)
-        with deferred():
-            for sink in step_sinks:
-                sink.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
-                                 surfaces, equivalent, corrective, slopes, truth=truth_odometry)
+        if step_sinks:
+            with deferred():
+                for sink in step_sinks:
+                    sink.record_step(done.observation, out.forces, out.controls, reference.position, reference.yaw,
+                                     surfaces, equivalent, corrective, slopes, truth=truth_odometry)
         if not loop.flying:
             break
         if progress and (k + 1) % report_every == 0:

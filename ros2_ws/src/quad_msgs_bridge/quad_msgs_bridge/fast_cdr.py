@@ -17,6 +17,8 @@ import struct
 from itertools import chain
 from typing import Callable, Sequence
 
+import numpy as np
+
 from quad_msgs_bridge.contract import BASE_FRAME, ODOM_FRAME
 from quad_msgs_bridge.conversions import DIAGNOSTICS_DIMS, multi_array_dimensions, rotor_forces_dims
 from quad_msgs_bridge.mixer import ROTOR_NAMES
@@ -299,4 +301,89 @@ def decode_rotor_forces(data: bytes) -> tuple[float, float, float, float]:
     if len(values) != 4:
         raise ValueError(f'rotor_forces: expected 4 values, got {len(values)}')
     _check_finite(values, 'rotor_forces')
+    return values
+
+
+# --- array decoders: many messages of one fixed layout at once ------------------------------------
+# ``rows`` is an (N, size) uint8 array, one message per row (bag.mcap_blocks.MessageBlock.rows), all of
+# the same size. The layout is read from the first row as the decoders above read one message; every
+# row must carry the same bytes wherever that layout is constant (frame ids, array layouts), else
+# ValueError (the caller then reads the messages one by one).
+
+def _float_columns(rows, offset: int, count: int):
+    """(N, count) float64 of the ``count`` little-endian float64 fields at byte ``offset`` of each row."""
+    return rows[:, offset:offset + 8 * count].copy().view('<f8')
+
+
+def _stamps(rows):
+    """(N,) int64 nanoseconds of the header stamps (int32 sec, uint32 nanosec after the encapsulation)."""
+    sec = rows[:, 4:8].copy().view('<i4')[:, 0].astype(np.int64)
+    return sec * 1_000_000_000 + rows[:, 8:12].copy().view('<u4')[:, 0].astype(np.int64)
+
+
+class LayoutMismatch(ValueError):
+    """Messages of one topic differ where an array decoder needs them to be the same (read them one by one)."""
+
+
+def _check_same(rows, start: int, end: int, what: str) -> None:
+    if not (rows[:, start:end] == rows[0, start:end]).all() or not (rows[:, :2] == rows[0, :2]).all():
+        raise LayoutMismatch(f'{what}: the messages differ in their constant fields')
+
+
+def _check_finite_rows(values, what: str) -> None:
+    if not np.isfinite(values).all():
+        first = int(np.flatnonzero(~np.isfinite(values).all(axis=1))[0])
+        _check_finite(values[first].tolist(), what)
+
+
+def _first(rows, what: str) -> bytes:
+    data = rows[0].tobytes()
+    _check_encapsulation(data, what)
+    return data
+
+
+def decode_odometry_rows(rows):
+    """(stamps [ns] (N,), pose (N, 7): position [m] and orientation (x, y, z, w), twist (N, 6): linear
+    [m/s] and angular [rad/s], body) of nav_msgs/Odometry messages; ValueError on a non-finite value."""
+    data = _first(rows, 'odometry')
+    offset = _after_string(data, len(ENCAPSULATION) + _STAMP.size)
+    offset = _aligned(_after_string(data, offset), 8)
+    _check_same(rows, len(ENCAPSULATION) + _STAMP.size, offset, 'odometry')
+    if rows.shape[1] != offset + _POSE.size + _TWIST.size + 2 * _COVARIANCE_SIZE:
+        raise LayoutMismatch('odometry: not the size of its layout')
+    pose = _float_columns(rows, offset, 7)
+    twist = _float_columns(rows, offset + _POSE.size + _COVARIANCE_SIZE, 6)
+    _check_finite_rows(np.hstack((pose, twist)), 'odometry')
+    return _stamps(rows), pose, twist
+
+
+def decode_stamped_floats_rows(rows, count: int, what: str):
+    """(stamps [ns] (N,), (N, count) float64) of messages of a header then ``count`` float64 (a
+    geometry_msgs/WrenchStamped: 6, a PoseStamped: 7); ValueError on a non-finite value."""
+    data = _first(rows, what)
+    offset = _aligned(_after_string(data, len(ENCAPSULATION) + _STAMP.size), 8)
+    _check_same(rows, len(ENCAPSULATION) + _STAMP.size, offset, what)
+    if rows.shape[1] != offset + 8 * count:
+        raise LayoutMismatch(f'{what}: expected {count} float64 fields after the header')
+    values = _float_columns(rows, offset, count)
+    _check_finite_rows(values, what)
+    return _stamps(rows), values
+
+
+def decode_multi_array_rows(rows, what: str):
+    """(N, count) float64 of the data (from data_offset on) of std_msgs/Float64MultiArray messages;
+    ValueError on a non-finite value."""
+    data = _first(rows, what)
+    offset = len(ENCAPSULATION)
+    dims = _UINT32.unpack_from(data, offset)[0]
+    offset += 4
+    for _ in range(dims):                                   # label, size, stride
+        offset = _aligned(_after_string(data, offset), 4) + 8
+    data_offset, count = struct.unpack_from('<2I', data, _aligned(offset, 4))
+    start = _aligned(_aligned(offset, 4) + 8, 8)
+    _check_same(rows, len(ENCAPSULATION), start, what)
+    if rows.shape[1] != start + 8 * count:
+        raise LayoutMismatch(f'{what}: expected {count} float64 values')
+    values = _float_columns(rows, start, count)[:, data_offset:]
+    _check_finite_rows(values, what)
     return values

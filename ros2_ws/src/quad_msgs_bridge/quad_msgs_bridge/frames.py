@@ -139,6 +139,26 @@ def euler_from_quaternion(q: Quat) -> Vec3:
     return phi, theta, psi
 
 
+@njit(cache=True, error_model='numpy')
+def _yaw_rows(q):
+    """psi [rad] and the norm of each row (x, y, z, w) of q (N, 4), by :func:`_euler` row after row."""
+    out = np.empty((q.shape[0], 2))
+    for i in range(q.shape[0]):
+        out[i, 0], out[i, 1] = _euler(q[i, 0], q[i, 1], q[i, 2], q[i, 3])[2:]
+    return out
+
+
+def yaws_from_quaternions(q: np.ndarray) -> np.ndarray:
+    """(N,) yaw psi [rad] of quaternions q (N, 4) (x, y, z, w), each equal to euler_from_quaternion's; ValueError
+    as it gives for the first one without an orientation."""
+    psi, norm = _yaw_rows(np.ascontiguousarray(q)).T
+    bad = ~(norm > 0.0) | ~np.isfinite(norm)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        check_orientation(tuple(q[i]), float(norm[i]))
+    return psi
+
+
 def rotation_from_euler(phi: float, theta: float, psi: float) -> tuple[Vec3, Vec3, Vec3]:
     """Rows of the body-to-world rotation matrix R = Rz(psi) Ry(theta) Rx(phi)."""
     return _rotation(*kernel_numbers(phi, theta, psi))

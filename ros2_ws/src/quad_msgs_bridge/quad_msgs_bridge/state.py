@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from typing import NamedTuple, Sequence
 
+import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.frames import (Quat, Vec3, _body_rates, _body_to_world, _euler, _euler_rates, _quaternion,
@@ -75,4 +76,31 @@ def state_from_odometry(sample: OdometrySample) -> list[float]:
                                             tuple(sample.linear_velocity), tuple(sample.angular_velocity))
     check_orientation(sample.orientation, norm)
     check_pitch(state[THETA], cos_theta)
+    return state
+
+
+@njit(cache=True, error_model='numpy')
+def _state_rows(pose, twist):
+    """:func:`_state_fields` of every row of odometry fields (pose (N, 7), twist (N, 6), as
+    fast_cdr.decode_odometry_rows gives them), one vehicle's kernel row after row: (N, 14)."""
+    out = np.empty((pose.shape[0], STATE_SIZE + 2))
+    for i in range(pose.shape[0]):
+        fields = _state_fields((pose[i, 0], pose[i, 1], pose[i, 2]), (pose[i, 3], pose[i, 4], pose[i, 5], pose[i, 6]),
+                               (twist[i, 0], twist[i, 1], twist[i, 2]), (twist[i, 3], twist[i, 4], twist[i, 5]))
+        for j in range(STATE_SIZE + 2):
+            out[i, j] = fields[j]
+    return out
+
+
+def states_from_odometry_rows(pose: np.ndarray, twist: np.ndarray) -> np.ndarray:
+    """(N, 12) core states of N odometry messages' fields (pose (N, 7): position [m], orientation (x, y, z, w);
+    twist (N, 6): linear [m/s] and angular [rad/s] velocity, body), each row equal to
+    :func:`state_from_odometry` of that message, which raises the same ValueError for the first bad one."""
+    fields = _state_rows(np.ascontiguousarray(pose), np.ascontiguousarray(twist))
+    state, norm, cos_theta = fields[:, :STATE_SIZE], fields[:, STATE_SIZE], fields[:, STATE_SIZE + 1]
+    bad = ~(norm > 0.0) | ~np.isfinite(norm) | (np.isnan(cos_theta) & np.isfinite(state[:, THETA]))
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        check_orientation(tuple(pose[i, 3:]), float(norm[i]))
+        check_pitch(float(state[i, THETA]), float(cos_theta[i]))
     return state

@@ -140,7 +140,7 @@ def write_metadata(bag_dir: Path, information: dict) -> Path:
 def read_metadata(bag_dir: Path) -> dict:
     """The ``rosbag2_bagfile_information`` mapping of a bag directory."""
     path = Path(bag_dir) / METADATA_FILE
-    information = yaml.safe_load(path.read_text())
+    information = yaml.load(path.read_text(), Loader=getattr(yaml, 'CSafeLoader', yaml.SafeLoader))   # C: 10x faster
     if not isinstance(information, dict) or 'rosbag2_bagfile_information' not in information:
         raise ValueError(f'{path}: not a rosbag2 metadata file')
     return information['rosbag2_bagfile_information']

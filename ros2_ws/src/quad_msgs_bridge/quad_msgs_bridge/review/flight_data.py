@@ -17,7 +17,6 @@ them over every step as it goes, and :meth:`Flight.metrics` uses those sums once
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
@@ -26,7 +25,7 @@ import numpy as np
 
 from quad_msgs_bridge.bag.flight_bag import recorded_failure
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
-from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, FlightRecord, StatisticsAccumulator,
+from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, BlockStatistics, FlightRecord,
                                              flight_metrics, has_fuzzy_term, metrics_from_statistics)
 from quad_msgs_bridge.review.verdict import ending
 from quad_msgs_bridge.state import PSI, STATE_NAMES, STATE_SIZE
@@ -52,7 +51,7 @@ SURFACE_UNITS = ('m/s', 'm/s', 'm/s', 'rad/s', 'rad/s', 'rad/s')
 #: the units of each subsystem's virtual control, and so of its NN (equivalent) and fuzzy (corrective) terms:
 #: commanded accelerations (x, y), U1 (z), U2, U3 (phi, theta) and U4 (psi)
 VIRTUAL_CONTROL_UNITS = ('m/s^2', 'm/s^2', 'N', 'N', 'N', 'N m')
-_WIDTH = sum(columns for columns, _ in SERIES.values())
+WIDTH = sum(columns for columns, _ in SERIES.values())   #: columns of a row of all SERIES side by side
 _SLICES, _start = {}, 0
 for _name, (_columns, _) in SERIES.items():
     _SLICES[_name], _start = slice(_start, _start + _columns), _start + _columns
@@ -171,33 +170,42 @@ class Flight:
 
 
 class StepSums:
-    """The metrics' sums over every control step of a flight, added one step at a time."""
+    """The metrics' sums over every control step of a flight, added a block of rows at a time (rows as
+    :class:`FlightLog` keeps them: the SERIES side by side, in step order)."""
 
     def __init__(self, settle_time: float, f_min: float, f_max: float, share_window: float = SHARE_WINDOW):
         self.settle_time, self.share_window = settle_time, share_window
-        self.statistics = StatisticsAccumulator(settle_time, f_min, f_max)
+        self.statistics = BlockStatistics(settle_time, f_min, f_max)
         self.all_finite = True
-        self.first_time: float | None = None
-        self.last_time = 0.0
         #: fuzzy share window k (steps with k <= (t - first time) / share_window < k + 1) -> per subsystem
         #: (sum |corrective|, sum |equivalent| + |corrective|)
         self.shares: dict[int, np.ndarray] = {}
 
-    def add(self, t: float, state, reference_position, reference_yaw: float, forces, controls,
-            equivalent, corrective) -> None:
-        if self.first_time is None:
-            self.first_time = t
-        self.last_time = t
-        self.statistics.add(t, state[:3], state[PSI], reference_position, reference_yaw, forces, controls)
-        self.all_finite = self.all_finite and all(map(math.isfinite, forces)) and \
-            all(map(math.isfinite, state[:3]))
-        window = int((t - self.first_time) // self.share_window)
-        sums = self.shares.get(window)
-        if sums is None:
-            sums = self.shares[window] = np.zeros((2, len(SUBSYSTEMS)))
-        fuzzy = np.abs(corrective)
-        sums[0] += fuzzy
-        sums[1] += np.abs(equivalent) + fuzzy
+    @property
+    def first_time(self) -> float | None:
+        """[s] sim time of the first step added (None before any)."""
+        return self.statistics.first_time
+
+    @property
+    def last_time(self) -> float:
+        """[s] sim time of the last step added."""
+        return self.statistics.last_time
+
+    def add_rows(self, rows: np.ndarray) -> None:
+        """The next control steps, one row each (at least one)."""
+        t, state = rows[:, _SLICES['time'].start], rows[:, _SLICES['state']]
+        forces = rows[:, _SLICES['forces']]
+        self.statistics.add(t, state[:, :3], state[:, PSI], rows[:, _SLICES['reference_position']],
+                            rows[:, _SLICES['reference_yaw'].start], forces, rows[:, _SLICES['controls']])
+        self.all_finite = self.all_finite and bool(np.isfinite(forces).all() and np.isfinite(state[:, :3]).all())
+        windows = ((t - self.statistics.first_time) // self.share_window).astype(np.int64)
+        fuzzy = np.abs(rows[:, _SLICES['corrective']])
+        total = np.abs(rows[:, _SLICES['equivalent']]) + fuzzy
+        for window in np.unique(windows):
+            inside = windows == window
+            sums = self.shares.setdefault(int(window), np.zeros((2, len(SUBSYSTEMS))))
+            sums[0] += fuzzy[inside].sum(axis=0)
+            sums[1] += total[inside].sum(axis=0)
 
     def fuzzy_share(self) -> dict[str, list[float]]:
         """As :func:`~quad_msgs_bridge.review.metrics.fuzzy_share`, from the sums."""
@@ -211,10 +219,14 @@ class StepSums:
                                        ended_early=ended_early, arm_length=arm_length)
 
 
+#: rows a FlightLog collects before it sums and keeps them (a step's add is then one row written)
+PENDING_ROWS = 1024
+
+
 class FlightLog:
-    """Collects a flight one control step at a time, in bounded memory (see the module doc), and hands
-    out the :class:`Flight`. ``settle_time`` [s] and the rotor limits ``f_min``, ``f_max`` [N] are those
-    of the metrics."""
+    """Collects a flight one control step (:meth:`add`) or a block of steps (:meth:`add_rows`) at a time,
+    in bounded memory (see the module doc), and hands out the :class:`Flight`. ``settle_time`` [s] and the
+    rotor limits ``f_min``, ``f_max`` [N] are those of the metrics."""
 
     def __init__(self, settle_time: float, f_min: float, f_max: float, max_rows: int = MAX_ROWS):
         if max_rows < 2 or max_rows % 2:
@@ -222,28 +234,56 @@ class FlightLog:
         self.max_rows = max_rows
         self.sums = StepSums(settle_time, f_min, f_max)
         self.settle_time = settle_time
-        self.steps = 0
+        self.steps = 0                   #: control steps added
         self.stride = 1
-        self._rows = np.empty((min(4096, max_rows), _WIDTH))
-        self._count = 0
+        self._rows = np.empty((min(4096, max_rows), WIDTH))
+        self._count = 0                  #: rows kept
+        self._taken = 0                  #: steps summed and kept (or dropped) so far
+        self._pending = np.empty((PENDING_ROWS, WIDTH))
+        self._filled = 0
 
     def add(self, t: float, state: Sequence[float], reference_position: Sequence[float], reference_yaw: float,
             forces: Sequence[float], controls: Sequence[float], surfaces: Sequence[float],
             equivalent: Sequence[float], corrective: Sequence[float]) -> None:
         """One control step (units as in :class:`Flight`)."""
-        self.sums.add(t, state, reference_position, reference_yaw, forces, controls, equivalent, corrective)
-        step, self.steps = self.steps, self.steps + 1
-        if step % self.stride:
+        if self._filled == PENDING_ROWS:
+            self._flush()
+        self._pending[self._filled] = (t, *state, *reference_position, reference_yaw, *forces, *controls,
+                                       *surfaces, *equivalent, *corrective)
+        self._filled += 1
+        self.steps += 1
+
+    def add_rows(self, rows: np.ndarray) -> None:
+        """Control steps as rows of the SERIES side by side (shape (N, WIDTH), units as in :class:`Flight`)."""
+        self._flush()
+        self.steps += len(rows)
+        self._take(rows)
+
+    def _flush(self) -> None:
+        if self._filled:
+            filled, self._filled = self._filled, 0
+            self._take(self._pending[:filled])
+
+    def _take(self, rows: np.ndarray) -> None:
+        """Sum ``rows`` (the next steps) and keep those whose step is a multiple of the stride."""
+        if not len(rows):
             return
-        if self._count == len(self._rows):
-            self._make_room()
-        self._rows[self._count] = (t, *state, *reference_position, reference_yaw, *forces, *controls,
-                                   *surfaces, *equivalent, *corrective)
-        self._count += 1
+        self.sums.add_rows(rows)
+        base, self._taken = self._taken, self._taken + len(rows)
+        i = (-base) % self.stride                      # the first of ``rows`` to keep
+        while i < len(rows):
+            if self._count == len(self._rows):
+                self._make_room()
+                i += (-(base + i)) % self.stride       # the next multiple of a doubled stride
+                continue
+            picked = rows[i::self.stride][:len(self._rows) - self._count]
+            self._rows[self._count:self._count + len(picked)] = picked
+            self._count += len(picked)
+            i += len(picked) * self.stride
 
     def _make_room(self) -> None:
         if len(self._rows) < self.max_rows:      # grow up to max_rows
-            grown = np.empty((min(2 * len(self._rows), self.max_rows), _WIDTH))
+            grown = np.empty((min(2 * len(self._rows), self.max_rows), WIDTH))
             grown[:self._count] = self._rows[:self._count]
             self._rows = grown
             return
@@ -255,6 +295,7 @@ class FlightLog:
     def flight(self, params: VehicleParams, **about) -> Flight:
         """The flight so far (copies of the rows); ``about``: label, path, custom_data, warnings, ended_early,
         summary (see :class:`Flight`). ValueError if no step was added."""
+        self._flush()
         if not self._count:
             raise ValueError('no control step was recorded')
         rows = self._rows[:self._count]

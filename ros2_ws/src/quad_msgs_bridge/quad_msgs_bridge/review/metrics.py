@@ -137,21 +137,64 @@ def rotor_at_limit(forces, f_min: float, f_max: float):
     return at_limit
 
 
+class BlockStatistics:
+    """:class:`TrackingStatistics` of one flight, summed a block of consecutive control steps at a time: each
+    argument of :meth:`add` holds the block's steps along its first axis (time (N,) [s], position (N, 3) [m],
+    yaw (N,) [rad], reference position (N, 3), reference yaw (N,), forces (N, 4) [N], U1..U4 (N, 4))."""
+
+    def __init__(self, settle_time: float, f_min: float, f_max: float):
+        self.settle_time, self.f_min, self.f_max = settle_time, f_min, f_max
+        self.steps = self.settled_steps = self.saturated_steps = self.saturated_settled_steps = 0
+        self.squared_error_sum = self.max_error = self.squared_yaw_error_sum = 0.0
+        self.variation = np.zeros(4)
+        self.first_time: float | None = None
+        self.last_time = self.first_settled_time = self.last_settled_time = 0.0
+        self._last_settled_controls: np.ndarray | None = None
+
+    def add(self, time, position, yaw, reference_position, reference_yaw, forces, controls) -> None:
+        """The next block of steps (at least one)."""
+        if self.first_time is None:
+            self.first_time = float(time[0])
+        self.last_time = float(time[-1])
+        self.steps += len(time)
+        at_limit = rotor_at_limit(np.transpose(forces), self.f_min, self.f_max)
+        self.saturated_steps += int(at_limit.sum())
+        settled = time >= self.first_time + self.settle_time
+        if not settled.any():
+            return
+        error = position[settled] - reference_position[settled]
+        squared = (error * error).sum(axis=1)
+        yaw_error = wrap_angle(yaw[settled] - reference_yaw[settled])
+        settled_controls = controls[settled]
+        if self._last_settled_controls is None:
+            self.first_settled_time = float(time[settled][0])
+        else:
+            settled_controls = np.vstack((self._last_settled_controls, settled_controls))
+        self.variation = self.variation + np.abs(np.diff(settled_controls, axis=0)).sum(axis=0)
+        self._last_settled_controls = settled_controls[-1].copy()
+        self.settled_steps += int(settled.sum())
+        self.squared_error_sum += float(squared.sum())
+        self.max_error = max(self.max_error, float(np.sqrt(squared.max())))
+        self.squared_yaw_error_sum += float((yaw_error * yaw_error).sum())
+        self.saturated_settled_steps += int(at_limit[settled].sum())
+        self.last_settled_time = float(time[settled][-1])
+
+    def statistics(self) -> TrackingStatistics:
+        return TrackingStatistics(
+            steps=self.steps, settled_steps=self.settled_steps, squared_error_sum=self.squared_error_sum,
+            max_error=self.max_error, squared_yaw_error_sum=self.squared_yaw_error_sum,
+            variation=tuple(float(v) for v in self.variation),
+            settled_span=self.last_settled_time - self.first_settled_time, saturated_steps=self.saturated_steps,
+            saturated_settled_steps=self.saturated_settled_steps, first_time=self.first_time,
+            last_time=self.last_time)
+
+
 def record_statistics(record: FlightRecord, settle_time: float, f_min: float, f_max: float) -> TrackingStatistics:
     """The statistics of a whole recorded flight."""
-    settled = record.time >= record.time[0] + settle_time
-    error = np.linalg.norm(record.position - record.reference_position, axis=1)[settled]
-    yaw_error = wrap_angle(record.yaw - record.reference_yaw)[settled]
-    t = record.time[settled]
-    at_limit = rotor_at_limit(record.forces.T, f_min, f_max)
-    return TrackingStatistics(
-        steps=len(record.time), settled_steps=int(settled.sum()),
-        squared_error_sum=float(np.sum(error ** 2)), max_error=float(error.max()) if error.size else 0.0,
-        squared_yaw_error_sum=float(np.sum(yaw_error ** 2)),
-        variation=tuple(float(v) for v in np.abs(np.diff(record.controls[settled], axis=0)).sum(axis=0)),
-        settled_span=float(t[-1] - t[0]) if t.size else 0.0,
-        saturated_steps=int(at_limit.sum()), saturated_settled_steps=int(at_limit[settled].sum()),
-        first_time=float(record.time[0]), last_time=float(record.time[-1]))
+    statistics = BlockStatistics(settle_time, f_min, f_max)
+    statistics.add(record.time, record.position, record.yaw, record.reference_position, record.reference_yaw,
+                   record.forces, record.controls)
+    return statistics.statistics()
 
 
 class StatisticsAccumulator:
