@@ -16,9 +16,12 @@ Examples:
   python3 run_stack.py --controller smc-sign --out out/sign   # same disturbances, to compare
   python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
-Subcommands (each has its own --help): campaign, and the bag tools review, recover, export, rosbag2-qos (below).
+Subcommands (each has its own --help): campaign, tune, stress, and the bag tools review, recover, export,
+rosbag2-qos (below).
   python3 run_stack.py campaign SPEC.yaml --out DIR      # a robustness campaign (docs/CAMPAIGNS.md);
                                                          #   the shipped specs: run_stack.py campaign --list
+  python3 run_stack.py tune SPEC.yaml --controller pid --trials 40 --flights 100 --out DIR   # docs/TUNING.md
+  python3 run_stack.py stress SPEC.yaml --kind wind --controllers nnit2fsmc,pid --out DIR   # breaking points
 
 From a clone, python3 runs the stack with the clone's .venv (bash scripts/fly.sh makes it).
 Limits: --vehicles at most 20; --seed 0 to 2^31 - 1; --physics-rate a whole multiple of the
@@ -423,6 +426,9 @@ def run(argv: list[str]) -> int:
     if argv[:1] == ['campaign']:
         from flight_stack.campaign.cli import main as campaign_main
         return campaign_main(argv[1:])
+    if argv[:1] in (['tune'], ['stress']):
+        from flight_stack.campaign import study_cli
+        return (study_cli.tune_main if argv[0] == 'tune' else study_cli.stress_main)(argv[1:])
     if argv[:1] == ['export']:
         from flight_stack.export import main as export_main
         return export_main(argv[1:])

@@ -39,7 +39,7 @@ def test_help_names_the_subcommands_and_the_caps():
                             text=True, timeout=300)
     assert result.returncode == 0, result.stderr
     text = ' '.join(result.stdout.split())
-    for subcommand in ('campaign', 'review', 'recover', 'rosbag2-qos'):
+    for subcommand in ('campaign', 'tune', 'stress', 'review', 'recover', 'rosbag2-qos'):
         assert f'run_stack.py {subcommand}' in text, subcommand
     from flight_stack.fleet import MAX_VEHICLES
     assert f'at most {MAX_VEHICLES}' in text

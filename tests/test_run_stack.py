@@ -251,7 +251,7 @@ def test_a_missing_library_says_how_to_run_the_stack(module, distribution, tmp_p
     assert not (tmp_path / 'run').exists()
 
 
-@pytest.mark.parametrize('command', [[], ['review'], ['recover'], ['rosbag2-qos']])
+@pytest.mark.parametrize('command', [[], ['review'], ['recover'], ['rosbag2-qos'], ['tune'], ['stress']])
 def test_help_is_plain_text(command, capsys):
     with pytest.raises(SystemExit) as done:
         run_stack.main([*command, '--help'])

@@ -55,6 +55,7 @@ class RunOptions:
     progress: bool = True
     vehicle_file: str | None = None
     gains_file: str | None = None
+    report: bool = True                 #: write report.html (with its plots) beside campaign.json
 
     def worker_count(self) -> int:
         """The local worker processes to use; ParameterError on an invalid --workers or --batch-size."""
@@ -99,6 +100,11 @@ def flights_to_fly(spec: CampaignSpec, done: set) -> int:
     return spec.flights * len(spec.controllers) - flown
 
 
+def holds_campaign(out_dir: Path) -> bool:
+    """Whether ``out_dir`` holds a campaign (begun or finished: one only ``resume`` continues)."""
+    return (out_dir / FLIGHTS_FILE).exists() or (out_dir / SPEC_FILE).exists()
+
+
 def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
     """ParameterError if ``out_dir`` cannot take this campaign (touches nothing): it is a file, or it holds a
     campaign and ``resume`` is off, or it holds another spec's campaign, or ``resume`` is on and it holds
@@ -110,11 +116,11 @@ def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
         base = base.parent
     if not base.is_dir():
         raise ParameterError(f'--out: {base} is not a folder, so {out_dir} cannot be created')
-    flights_path, spec_path = out_dir / FLIGHTS_FILE, out_dir / SPEC_FILE
-    if resume and not (flights_path.exists() or spec_path.exists()):
+    spec_path = out_dir / SPEC_FILE
+    if resume and not holds_campaign(out_dir):
         raise ParameterError(f'--resume: {out_dir} holds no campaign to resume (no {FLIGHTS_FILE}); check the path, '
                              'or leave out --resume to start the campaign there')
-    if flights_path.exists() or spec_path.exists():
+    if holds_campaign(out_dir):
         if not resume:
             raise ParameterError(f'--out: {out_dir} already holds a campaign; pass --resume (resume=True from '
                                  'Python) to fly only its missing flights, or choose another folder')
@@ -315,7 +321,7 @@ def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers
         flights.close()
         pool.close(cancel=cancelled)
     wall = time.perf_counter() - started
-    summary_path = write_results(spec, out_dir, wall_time_s=wall, vehicle_steps=steps)
+    summary_path = write_results(spec, out_dir, wall_time_s=wall, vehicle_steps=steps, report=options.report)
     return CampaignOutcome(total, wall, steps, summary_path)
 
 
@@ -338,8 +344,8 @@ def _progress_bar(total: int, already: int, enabled: bool):
 
 
 def write_results(spec: CampaignSpec, out_dir: Path, wall_time_s: float | None = None,
-                  vehicle_steps: int | None = None) -> Path:
-    """campaign.json (and report.html) from every row of flights.csv."""
+                  vehicle_steps: int | None = None, report: bool = True) -> Path:
+    """campaign.json (and, with ``report``, report.html) from every row of flights.csv."""
     rows = read_flights(out_dir / FLIGHTS_FILE)
     document = {
         'spec': spec.to_mapping(),
@@ -353,6 +359,7 @@ def write_results(spec: CampaignSpec, out_dir: Path, wall_time_s: float | None =
     }
     path = out_dir / SUMMARY_FILE
     path.write_text(json.dumps(document, indent=2) + '\n')
-    from .report import write_report
-    write_report(rows, document, out_dir)
+    if report:
+        from .report import write_report
+        write_report(rows, document, out_dir)
     return path

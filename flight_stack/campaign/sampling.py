@@ -28,7 +28,8 @@ from .spec import CampaignSpec
 TRANSLATIONAL_DRAG = ('Kfx', 'Kfy', 'Kfz', 'Kfphi', 'Kftheta', 'Kfpsi')
 #: (spec key, number of values) in the order the vehicle stream's uniform numbers are used
 VEHICLE_DRAW_ORDER = (('mass', 1), ('inertia', 3), ('drag', 6), ('thrust_coefficient', 4),
-                      ('drag_coefficient', 4), ('cog_offset_m', 2), ('rotor_efficiency_loss', 4))
+                      ('drag_coefficient', 4), ('cog_offset_m', 2), ('rotor_efficiency_loss', 4),
+                      ('one_rotor_efficiency_loss', 1))
 VEHICLE_DRAWS = sum(count for _, count in VEHICLE_DRAW_ORDER)
 #: the sampled values of a flight as flights.csv names them (SI units)
 SAMPLED_COLUMNS = ('mass_kg', 'Ix_kgm2', 'Iy_kgm2', 'Iz_kgm2', *TRANSLATIONAL_DRAG,
@@ -75,7 +76,8 @@ def sample_conditions(spec: CampaignSpec, nominal: VehicleParams, flight: int) -
         distribution = spec.vehicle.get(key)
         return distribution.value(draws[key][index]) if distribution else 0.0
 
-    loss = spec.vehicle.get('rotor_efficiency_loss')
+    losses = [loss_draw(spec, 'rotor_efficiency_loss', draws, i) for i in range(4)]
+    losses[0] = 1.0 - (1.0 - losses[0]) * (1.0 - loss_draw(spec, 'one_rotor_efficiency_loss', draws, 0))
     vehicle = replace(
         nominal,
         m=nominal.m * relative('mass', 0),
@@ -85,14 +87,20 @@ def sample_conditions(spec: CampaignSpec, nominal: VehicleParams, flight: int) -
         rotor_thrust_factors=tuple(relative('thrust_coefficient', i) for i in range(4)),
         rotor_drag_factors=tuple(relative('drag_coefficient', i) for i in range(4)),
         cog_offset=(absolute('cog_offset_m', 0), absolute('cog_offset_m', 1), 0.0),
-        # a loss lies in [0, bound): the uniform half width maps onto [0, x), a normal onto |N(0, s)|
-        rotor_efficiency_loss=tuple(0.0 if loss is None else
-                                    (loss.scale * draws['rotor_efficiency_loss'][i] if loss.kind == 'uniform'
-                                     else abs(loss.value(draws['rotor_efficiency_loss'][i])))
-                                    for i in range(4)))
+        rotor_efficiency_loss=tuple(losses))
     direction = (math.radians(spec.wind_direction_deg) if spec.wind_direction_deg is not None
                  else float(streams.wind.uniform(0.0, 2.0 * math.pi)))
     return FlightConditions(flight, vehicle, direction)
+
+
+def loss_draw(spec: CampaignSpec, key: str, draws: dict, index: int) -> float:
+    """The lost thrust fraction of a loss key (:data:`.spec.LOSS_KEYS`) for its ``index``-th draw: 0 when
+    the spec leaves the key out; a uniform half width x maps onto [0, x), a normal onto |N(0, s)|, a
+    fixed value is that value."""
+    loss = spec.vehicle.get(key)
+    if loss is None:
+        return 0.0
+    return loss.scale * draws[key][index] if loss.kind == 'uniform' else abs(loss.value(draws[key][index]))
 
 
 def _noise_levels(spec: CampaignSpec, attribute: str) -> SensorErrors:

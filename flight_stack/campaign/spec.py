@@ -19,6 +19,7 @@ left out means no such perturbation; other tools write these files, so the names
       drag_coefficient: 0.1    #   Kd of each rotor, on its own
       cog_offset_m: 0.01       #   [m] absolute: centre of gravity uniform in +-0.01 m along body x and y
       rotor_efficiency_loss: 0.1   # absolute: each rotor loses uniform [0, 0.1] of its thrust
+      one_rotor_efficiency_loss: {dist: fixed, value: 0.3}   # rotor 1 alone loses 0.3 of its thrust
     wind: {mean_speed_mps: 3.0, turbulence: moderate}   # none | light | moderate | severe
     sensor_noise: {position_m: 0.01, velocity_mps: 0.02, attitude_rad: 0.01, body_rate_radps: 0.02}
     delay_s: 0.004             # [s] transport delay, a whole number of control steps
@@ -30,18 +31,21 @@ left out means no such perturbation; other tools write these files, so the names
     plant: quad_sim            # what the simulator flies: quad_sim (our model), rotorpy or rotorpy-bare (docs/ROTORPY.md)
 
 ``inertia`` draws Ix, Iy and Iz on their own. A distribution is a number (relative uniform half
-width), ``{dist: uniform, half_width: x}`` or ``{dist: normal, std: s}``; relative draws must keep a
-parameter positive (half width < 1, 3 std < 1). ``wind`` takes an optional ``direction_deg`` (the
-direction the wind blows towards, from +x (east) counter-clockwise; default: drawn uniformly per
-flight). ``sensor_noise`` entries are white-noise standard deviations, or ``{std: s, bias_std: b}``
-with a constant bias drawn per flight from N(0, b^2). An unknown key, a negative standard deviation,
-an empty controller list or ``flights: 0`` is refused before anything flies, naming the key.
+width), ``{dist: uniform, half_width: x}``, ``{dist: normal, std: s}`` or ``{dist: fixed, value:
+v}`` (every flight the same: for a relative key the true value is (1 + v) times the nominal one, v >
+-1); relative draws must keep a parameter positive (half width < 1, 3 std < 1). ``wind`` takes an
+optional ``direction_deg`` (the direction the wind blows towards, from +x (east) counter-clockwise;
+default: drawn uniformly per flight). ``sensor_noise`` entries are white-noise standard deviations,
+or ``{std: s, bias_std: b}`` with a constant bias drawn per flight from N(0, b^2). An unknown key, a
+negative standard deviation, an empty controller list or ``flights: 0`` is refused before anything
+flies, naming the key.
 On ``plant: rotorpy`` a batch's vehicles are stepped one after the other by RotorPy (2-3 ms of wall
 time per vehicle and physics step, bench/bench_plants.py), and ``vehicle.thrust_coefficient`` / ``drag_coefficient`` are
 refused (RotorPy shares one torque-to-thrust ratio between its rotors).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from statistics import NormalDist
@@ -63,7 +67,15 @@ VEHICLE_KEYS = {
     'drag_coefficient': 'Kd of each rotor, relative',
     'cog_offset_m': 'centre of gravity along body x and y [m], absolute',
     'rotor_efficiency_loss': 'lost thrust fraction of each rotor, absolute, in [0, value]',
+    'one_rotor_efficiency_loss': 'lost thrust fraction of rotor 1 alone, absolute, in [0, value]',
 }
+#: vehicle keys whose value is absolute (the others are relative to the nominal value)
+ABSOLUTE_VEHICLE_KEYS = ('cog_offset_m', 'rotor_efficiency_loss', 'one_rotor_efficiency_loss')
+#: vehicle keys that are a lost fraction of thrust, in [0, 1)
+LOSS_KEYS = ('rotor_efficiency_loss', 'one_rotor_efficiency_loss')
+DISTRIBUTIONS = ('uniform', 'normal', 'fixed')
+#: the YAML key of each distribution's scale
+SCALE_KEYS = {'uniform': 'half_width', 'normal': 'std', 'fixed': 'value'}
 TURBULENCE = ('none', 'light', 'moderate', 'severe')
 NOISE_KEYS = ('position_m', 'velocity_mps', 'attitude_rad', 'body_rate_radps')
 _STANDARD_NORMAL = NormalDist()
@@ -74,11 +86,11 @@ TOP_KEYS = ('scenario', 'duration', 'settle_time', 'controllers', 'flights', 'se
 
 @dataclass(frozen=True)
 class Distribution:
-    """A random draw around a nominal value: uniform(-half_width, half_width) or normal(0, std)
-    truncated at +-3 std."""
+    """A random draw around a nominal value: uniform(-half_width, half_width), normal(0, std)
+    truncated at +-3 std, or the same value for every flight (fixed)."""
 
-    kind: str          #: 'uniform' or 'normal'
-    scale: float       #: half width (uniform) or standard deviation (normal), >= 0
+    kind: str          #: 'uniform', 'normal' or 'fixed'
+    scale: float       #: half width (uniform, >= 0), standard deviation (normal, >= 0) or the value (fixed)
 
     def value(self, u: float) -> float:
         """The draw for a standard uniform number u in [0, 1) (inverse transform sampling).
@@ -86,6 +98,8 @@ class Distribution:
         Every parameter takes exactly one uniform number whatever its distribution, so what one
         spec key draws never shifts the draws of another.
         """
+        if self.kind == 'fixed':
+            return self.scale
         if self.kind == 'uniform':
             return self.scale * (2.0 * u - 1.0)
         low, high = _STANDARD_NORMAL.cdf(-3.0), _STANDARD_NORMAL.cdf(3.0)
@@ -94,7 +108,7 @@ class Distribution:
     @property
     def bound(self) -> float:
         """Largest magnitude a draw can have."""
-        return self.scale if self.kind == 'uniform' else 3.0 * self.scale
+        return 3.0 * self.scale if self.kind == 'normal' else abs(self.scale)
 
 
 @dataclass(frozen=True)
@@ -158,7 +172,7 @@ class CampaignSpec:
         if self.disturbances is not None:
             document['disturbances'] = self.disturbances
         if self.vehicle:
-            document['vehicle'] = {key: {'dist': d.kind, ('half_width' if d.kind == 'uniform' else 'std'): d.scale}
+            document['vehicle'] = {key: {'dist': d.kind, SCALE_KEYS[d.kind]: d.scale}
                                    for key, d in self.vehicle.items()}
         if self.has_wind:
             document['wind'] = {'mean_speed_mps': self.wind_mean_speed_mps, 'turbulence': self.turbulence}
@@ -213,12 +227,16 @@ def _mapping(value, key: str, allowed) -> Mapping:
 def _distribution(value, key: str, relative: bool) -> Distribution:
     if isinstance(value, Mapping):
         kind = value.get('dist', 'uniform')
-        if kind not in ('uniform', 'normal'):
-            raise ParameterError(f'{key}.dist: {kind!r} is not uniform or normal')
-        scale_key = 'half_width' if kind == 'uniform' else 'std'
+        if kind not in DISTRIBUTIONS:
+            raise ParameterError(f'{key}.dist: {kind!r} is not one of {", ".join(DISTRIBUTIONS)}')
+        scale_key = SCALE_KEYS[kind]
         _mapping(value, key, ('dist', scale_key))
         if scale_key not in value:
             raise ParameterError(f'{key}.{scale_key}: missing')
+        if kind == 'fixed':
+            fixed = check_number(f'{key}.value', value['value'], -1.0 if relative else -math.inf,
+                                 low_inclusive=False)
+            return Distribution(kind, fixed)
         distribution = Distribution(kind, check_number(f'{key}.{scale_key}', value[scale_key], 0.0))
     else:
         distribution = Distribution('uniform', check_number(key, value, 0.0))
@@ -275,8 +293,7 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
         seed=_seed(top.get('seed', 0), 'seed'),
         max_error_m=check_number('max_error_m', top.get('max_error_m', 1.0), 0.0, low_inclusive=False),
         disturbances=disturbances,
-        vehicle={key: _distribution(value, f'vehicle.{key}', relative=key not in ('cog_offset_m',
-                                                                                   'rotor_efficiency_loss'))
+        vehicle={key: _distribution(value, f'vehicle.{key}', relative=key not in ABSOLUTE_VEHICLE_KEYS)
                  for key, value in vehicle.items()},
         wind_mean_speed_mps=check_number('wind.mean_speed_mps', wind.get('mean_speed_mps', 0.0), 0.0),
         wind_direction_deg=None if direction is None else check_number('wind.direction_deg', direction),
@@ -295,8 +312,11 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
     if spec.plant.startswith('rotorpy') and unrepresentable:
         raise ParameterError(f'vehicle.{unrepresentable[0]}: not with plant rotorpy (RotorPy has one thrust and one '
                              'torque coefficient for every rotor); leave it out or fly plant quad_sim')
-    if 'rotor_efficiency_loss' in spec.vehicle and spec.vehicle['rotor_efficiency_loss'].bound >= 1.0:
-        raise ParameterError('vehicle.rotor_efficiency_loss: a rotor cannot lose all of its thrust; keep it below 1')
+    for key in LOSS_KEYS:
+        if key in spec.vehicle and spec.vehicle[key].scale < 0.0:
+            raise ParameterError(f'vehicle.{key}: a loss is a fraction in [0, 1), got {spec.vehicle[key].scale:g}')
+        if key in spec.vehicle and spec.vehicle[key].bound >= 1.0:
+            raise ParameterError(f'vehicle.{key}: a rotor cannot lose all of its thrust; keep it below 1')
     _check_settling(spec, 'duration')
     return spec
 

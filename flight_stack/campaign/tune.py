@@ -1,0 +1,335 @@
+"""``run_stack.py tune SPEC --controller KIND --trials N --flights M --seeds 1,2 --out DIR``: equal-effort
+tuning of one controller kind on campaigns (docs/TUNING.md).
+
+A trial is one point of the kind's search space (nnit2fsmc_controller/search_spaces.py), flown as one
+campaign per tuning seed by the campaign runner (its workers, or a Dask cluster with ``--scheduler``);
+this module only chooses the gains and scores the flights. Optuna chooses them: a seeded TPE sampler,
+a study kept in ``DIR/study.journal`` (running the same command again continues it), and pruning after
+each seed's campaign. The first trial is the gains the tuning starts from (the packaged ones, or
+``--gains``), flown on every seed and never pruned, so the best trial is never worse than they are
+on the same flights.
+
+The objective (:func:`objective`), in metres, smaller is better: over every tuning flight, the median of
+the position RMSE, where a flight that failed counts as ``max_error_m`` (no finished flight is worse:
+its error stayed below it after settling); if fewer than 99 % of the flights finished, it is
+``max_error_m * (2 - finished share)`` instead, which is worse than any gains that finish 99 %. A point
+whose gains the controller refuses for the nominal vehicle scores ``2 max_error_m``, as bad as gains
+whose every flight fails.
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from nnit2fsmc_controller.factory import load_gains
+from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+from ..locking import FileLock
+from .batch import CampaignSetup
+from .results import FLIGHTS_FILE, read_flights
+from .runner import RunOptions, holds_campaign, run_campaign
+from .spec import CampaignSpec
+
+STUDY_FILE = 'study.journal'
+LOCK_FILE = '.tune.lock'
+REQUIRED_FINISHED_SHARE = 0.99
+#: TPE's random start: trials sampled at random before it models the objective
+STARTUP_TRIALS = 5
+
+
+@dataclass(frozen=True)
+class Score:
+    """The objective of a set of flights and what it is made of."""
+
+    objective_m: float         #: see :func:`objective`
+    median_rmse_m: float       #: median RMSE with failures counted as max_error_m
+    finished: int
+    flights: int
+
+    @property
+    def finished_share(self) -> float:
+        return self.finished / self.flights if self.flights else 0.0
+
+
+def objective(rows: list[dict], max_error_m: float) -> Score:
+    """The tuning objective [m] of the flights ``rows`` (flights.csv rows; see the module docstring)."""
+    if not rows:
+        raise ValueError('objective: no flight to score')
+    rmse = [r['rmse_position_m'] if r['finished'] else max_error_m for r in rows]
+    finished = sum(1 for r in rows if r['finished'])
+    median = float(np.median(rmse))
+    share = finished / len(rows)
+    value = median if share >= REQUIRED_FINISHED_SHARE else max_error_m * (2.0 - share)
+    return Score(value, median, finished, len(rows))
+
+
+def cannot_reach_required_share(failed: int, total_flights: int) -> bool:
+    """Whether ``failed`` failures already keep ``total_flights`` flights below the required finished share."""
+    return failed > (1.0 - REQUIRED_FINISHED_SHARE) * total_flights + 1e-9
+
+
+@dataclass(frozen=True)
+class TuneSetup:
+    """One tuning: the kind, the campaign every trial flies (per seed), the budget, where it goes."""
+
+    kind: str
+    spec: CampaignSpec             #: controllers = (kind,), flights = M; its seed is replaced by each tuning seed
+    seeds: tuple[int, ...]
+    trials: int
+    out_dir: Path
+    options: RunOptions            #: workers, scheduler, batch size, vehicle file; gains_file: the starting gains
+    sampler_seed: int = 0
+
+    def identity(self) -> dict:
+        """What makes two runs the same study (kept in the study; a resume must match it)."""
+        return {'kind': self.kind, 'spec': self.spec.to_mapping(), 'seeds': list(self.seeds),
+                'vehicle_file': self.options.vehicle_file, 'starting_gains': _digest(self.starting_gains())}
+
+    def starting_gains(self) -> dict:
+        return load_gains(self.options.gains_file)
+
+
+def _digest(document) -> str:
+    return hashlib.sha256(json.dumps(document, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """'1,2' -> (1, 2); ParameterError naming --seeds otherwise."""
+    try:
+        seeds = tuple(int(part) for part in text.split(',') if part.strip())
+    except ValueError:
+        raise ParameterError(f'--seeds: {text!r} is not a comma-separated list of whole numbers >= 0') from None
+    if not seeds or any(seed < 0 for seed in seeds) or len(set(seeds)) != len(seeds):
+        raise ParameterError(f'--seeds: {text!r}: give one or more distinct whole numbers >= 0')
+    return seeds
+
+
+def _optuna():
+    try:
+        import optuna
+    except ImportError as error:   # pragma: no cover - optuna is a pinned dependency
+        raise ParameterError('tune needs optuna (pip install -r requirements.txt)') from error
+    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    return optuna
+
+
+def open_study(setup: TuneSetup):
+    """The study in ``DIR/study.journal``: created (with the starting gains enqueued as trial 0) or
+    continued. A trial an interrupted (or killed) run left unfinished is marked failed and enqueued
+    again, once (its campaigns resume from their flights.csv). ParameterError if DIR holds another tuning."""
+    optuna = _optuna()
+    from optuna.storages import JournalStorage
+    from optuna.storages.journal import JournalFileBackend
+    storage = JournalStorage(JournalFileBackend(str(setup.out_dir / STUDY_FILE)))
+    name = f'tune-{setup.kind}'
+    existing = {summary.study_name: summary.n_trials for summary in optuna.get_all_study_summaries(storage)}
+    # the sampler's seed moves on by the trials already made, so a resumed study does not draw its
+    # random start again (a fresh sampler with the same seed would propose the same points)
+    study = optuna.create_study(
+        study_name=name, storage=storage, direction='minimize', load_if_exists=True,
+        sampler=optuna.samplers.TPESampler(seed=setup.sampler_seed + existing.get(name, 0),
+                                           n_startup_trials=STARTUP_TRIALS),
+        pruner=optuna.pruners.MedianPruner(n_startup_trials=STARTUP_TRIALS, n_warmup_steps=0))
+    identity = setup.identity()
+    stored = study.user_attrs.get('identity')
+    if stored is None:
+        study.set_user_attr('identity', identity)
+        study.enqueue_trial(values_in(setup.starting_gains(), setup.kind), user_attrs={'starting_gains': True})
+    elif stored != identity:
+        raise ParameterError(f'--out: {setup.out_dir} holds a tuning of another spec, kind, seeds or starting '
+                             f'gains ({json.dumps(stored)}); use another --out')
+    state = optuna.trial.TrialState
+    for trial in study.get_trials(deepcopy=False, states=(state.RUNNING,)):   # a run that was killed
+        study.tell(trial.number, state=state.FAIL)
+    requeued = list(study.user_attrs.get('requeued', []))
+    for trial in study.get_trials(deepcopy=False, states=(state.FAIL,)):       # interrupted (or killed)
+        if trial.number not in requeued:
+            study.enqueue_trial(trial.params, user_attrs={k: v for k, v in trial.user_attrs.items()
+                                                          if k == 'starting_gains'})
+            requeued.append(trial.number)
+    study.set_user_attr('requeued', requeued)
+    return study
+
+
+def trial_folder(setup: TuneSetup, values: dict) -> Path:
+    """The folder of a point's campaigns: named by the point, so a trial flown again resumes them."""
+    return setup.out_dir / 'campaigns' / _digest({k: repr(float(v)) for k, v in values.items()})
+
+
+class RefusedGains(Exception):
+    """The controller refuses a point's gains for the nominal vehicle (e.g. too little authority)."""
+
+
+def fly_point(setup: TuneSetup, values: dict, after_seed=None) -> Score:
+    """Fly the gains of ``values`` on every tuning seed (one campaign each, via the campaign runner) and
+    score all their flights. ``after_seed(index, score_so_far, rows_so_far)`` runs after each seed's
+    campaign (pruning raises from it). :class:`RefusedGains` if the controller refuses these gains."""
+    folder = trial_folder(setup, values)
+    folder.mkdir(parents=True, exist_ok=True)
+    gains_path = folder / 'gains.yaml'
+    gains_path.write_text(yaml.safe_dump(with_values(setup.starting_gains(), setup.kind, values), sort_keys=False))
+    try:
+        CampaignSetup.of(setup.spec, setup.options.vehicle_file, gains_path).check_controllers((setup.kind,))
+    except ParameterError as error:
+        raise RefusedGains(str(error)) from error
+    options = replace(setup.options, gains_file=str(gains_path), progress=False, report=False)
+    rows: list[dict] = []
+    score = None
+    for index, seed in enumerate(setup.seeds):
+        campaign_dir = folder / f'seed-{seed}'
+        run_campaign(replace(setup.spec, seed=seed), campaign_dir,
+                     replace(options, resume=holds_campaign(campaign_dir)))
+        rows += read_flights(campaign_dir / FLIGHTS_FILE)
+        score = objective(rows, setup.spec.max_error_m)
+        if after_seed is not None:
+            after_seed(index, score, rows)
+    return score
+
+
+def make_objective(setup: TuneSetup):
+    """The function Optuna minimises: suggest a point, fly it, prune a hopeless one after a seed."""
+    optuna = _optuna()
+    dimensions = search_space(setup.kind)
+    total_flights = setup.spec.flights * len(setup.seeds)
+
+    def run(trial) -> float:
+        values = {d.name: trial.suggest_float(d.name, d.low, d.high, log=d.log) for d in dimensions}
+        starting = bool(trial.user_attrs.get('starting_gains'))
+
+        def after_seed(index: int, score: Score, rows: list[dict]) -> None:
+            trial.set_user_attr('seeds_flown', index + 1)
+            _record(trial, score)
+            if starting or index == len(setup.seeds) - 1:
+                return
+            if cannot_reach_required_share(score.flights - score.finished, total_flights):
+                trial.set_user_attr('pruned_because', f'{score.flights - score.finished} failures: below '
+                                                      f'{REQUIRED_FINISHED_SHARE:.0%} finished whatever follows')
+                raise optuna.TrialPruned()
+            trial.report(score.objective_m, index)
+            if trial.should_prune():
+                trial.set_user_attr('pruned_because', 'worse than the median trial after the same seeds')
+                raise optuna.TrialPruned()
+
+        try:
+            return fly_point(setup, values, after_seed).objective_m
+        except RefusedGains as error:     # scored as if every flight failed
+            trial.set_user_attr('refused', str(error))
+            return 2.0 * setup.spec.max_error_m
+
+    return run
+
+
+def _record(trial, score: Score) -> None:
+    trial.set_user_attr('median_rmse_m', score.median_rmse_m)
+    trial.set_user_attr('finished', score.finished)
+    trial.set_user_attr('flights', score.flights)
+    trial.set_user_attr('objective_m', score.objective_m)
+
+
+def trials_table(study, kind: str) -> list[dict]:
+    """One row per trial of ``study``: state, objective and its parts, the point (search names)."""
+    rows = []
+    for trial in study.get_trials(deepcopy=False):
+        attrs = trial.user_attrs
+        duration = trial.duration.total_seconds() if trial.duration is not None else math.nan
+        rows.append({
+            'trial': trial.number, 'state': trial.state.name.lower(),
+            'starting_gains': bool(attrs.get('starting_gains')),
+            'objective_m': trial.value if trial.value is not None else attrs.get('objective_m', math.nan),
+            'median_rmse_m': attrs.get('median_rmse_m', math.nan),
+            'finished': attrs.get('finished', ''), 'flights': attrs.get('flights', ''),
+            'seeds_flown': attrs.get('seeds_flown', 0),
+            'pruned_because': attrs.get('pruned_because', '') or attrs.get('refused', ''),
+            'wall_time_s': duration,
+            **{d.name: trial.params.get(d.name, math.nan) for d in search_space(kind)}})
+    return rows
+
+
+def write_trials_table(study, setup: TuneSetup) -> Path:
+    path = setup.out_dir / f'trials-{setup.kind}.csv'
+    rows = trials_table(study, setup.kind)
+    columns = list(rows[0]) if rows else ['trial']
+    with path.open('w', newline='') as stream:
+        writer = csv.DictWriter(stream, fieldnames=columns, lineterminator='\n')
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def write_gains(study, setup: TuneSetup) -> Path:
+    """``DIR/gains-KIND.yaml``: the starting gains with the best trial's point, as a ROS 2 parameter file
+    (what ``--gains`` and the controller node's ``--params-file`` read), its provenance in the header."""
+    best = study.best_trial
+    gains = with_values(setup.starting_gains(), setup.kind, best.params)
+    attrs = best.user_attrs
+    lines = [f'# Tuned by run_stack.py tune for {setup.kind} (docs/TUNING.md): trial {best.number} of '
+             f'{len(study.trials)}, objective {best.value * 100:.3f} cm',
+             f'# (median RMSE {attrs["median_rmse_m"] * 100:.3f} cm, {attrs["finished"]}/{attrs["flights"]} '
+             f'finished) on seeds {",".join(map(str, setup.seeds))} x {setup.spec.flights} flights of '
+             f'"{setup.spec.scenario}", {setup.spec.duration:g} s each.',
+             '# Searched: ' + ', '.join(f'{d.name} = {best.params[d.name]:.4g} {d.unit.split(" (")[0]}'
+                                        for d in search_space(setup.kind))]
+    document = {'/**': {'ros__parameters': {'controller': setup.kind, **gains}}}
+    path = setup.out_dir / f'gains-{setup.kind}.yaml'
+    path.write_text('\n'.join(lines) + '\n' + yaml.safe_dump(document, sort_keys=False))
+    return path
+
+
+@dataclass(frozen=True)
+class TuneOutcome:
+    best_trial: int
+    best_objective_m: float
+    starting_objective_m: float
+    trials: int
+    gains_path: Path
+    table_path: Path
+
+
+def tune(setup: TuneSetup, progress: bool = True) -> TuneOutcome:
+    """Run (or continue) the tuning of ``setup`` until it holds ``setup.trials`` finished trials; write
+    the gains file and the trials table. ParameterError on invalid options, before anything flies."""
+    optuna = _optuna()
+    say = (lambda text: print(text, file=sys.stderr, flush=True)) if progress else (lambda text: None)
+    values_in(setup.starting_gains(), setup.kind)     # the starting point lies in the space
+    setup.out_dir.mkdir(parents=True, exist_ok=True)
+    with FileLock(setup.out_dir / LOCK_FILE,
+                  lambda holder: f'--out: another tune is writing {setup.out_dir} (process {holder})'):
+        study = open_study(setup)
+        done_states = (optuna.trial.TrialState.COMPLETE, optuna.trial.TrialState.PRUNED)
+        done = len(study.get_trials(deepcopy=False, states=done_states))
+        if done:
+            say(f'tune {setup.kind}: {done} trial(s) already in {setup.out_dir / STUDY_FILE}, continuing')
+
+        def report(study, trial) -> None:
+            write_trials_table(study, setup)
+            finished = len(study.get_trials(deepcopy=False, states=done_states))
+            attrs = trial.user_attrs
+            what = (f'objective {trial.value * 100:.3f} cm' if trial.state == optuna.trial.TrialState.COMPLETE
+                    else f'pruned after {attrs.get("seeds_flown", 0)} seed(s): {attrs.get("pruned_because", "")}'
+                    if trial.state == optuna.trial.TrialState.PRUNED else trial.state.name.lower())
+            share = f', finished {attrs["finished"]}/{attrs["flights"]}' if 'flights' in attrs else ''
+            best = (f'; best {study.best_value * 100:.3f} cm (trial {study.best_trial.number})'
+                    if any(t.state == optuna.trial.TrialState.COMPLETE for t in study.get_trials(deepcopy=False))
+                    else '')
+            duration = trial.duration.total_seconds() if trial.duration is not None else 0.0
+            say(f'tune {setup.kind}: trial {trial.number} ({finished}/{setup.trials}) {what}{share} '
+                f'in {duration:.1f} s{best}')
+
+        remaining = max(0, setup.trials - done)
+        if remaining:
+            study.optimize(make_objective(setup), n_trials=remaining, callbacks=[report])
+        starting = [t for t in study.get_trials(deepcopy=False) if t.user_attrs.get('starting_gains')
+                    and t.state == optuna.trial.TrialState.COMPLETE]
+        table = write_trials_table(study, setup)
+        gains = write_gains(study, setup)
+    return TuneOutcome(study.best_trial.number, study.best_value, starting[0].value if starting else math.nan,
+                       len(study.trials), gains, table)

@@ -1,0 +1,143 @@
+"""What ``run_stack.py tune`` searches for each controller kind (docs/TUNING.md): the one place the
+search spaces are declared.
+
+A kind's space is a tuple of :class:`Dimension`: one searched number, the gains of the gains file
+(``config/controller.yaml``, dotted names) that all take its value, its range and unit. x and y share
+their gains (the helix and the campaigns are symmetric in x and y), so one dimension sets both.
+Every kind gets the same number of dimensions (six), chosen in the position loops that the campaigns'
+wind and mass perturbations load (and, for the adaptive kinds, their translational adaptation); the
+attitude loops keep the packaged gains. Each range contains the packaged
+value (so the packaged gains can be enqueued as the first trial) and spans it by about a decade on
+a log scale. Adding a kind is one entry of :data:`SEARCH_SPACES`.
+"""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+
+@dataclass(frozen=True)
+class Dimension:
+    """One searched number: ``gains`` (dotted names) all take its value, in [low, high] ``unit``."""
+
+    name: str                  #: the search parameter's name (the trials table's column)
+    gains: tuple[str, ...]     #: the gains file's entries it sets
+    low: float
+    high: float
+    unit: str
+    log: bool = True           #: sampled uniformly in log(value)
+
+
+def _xy(section: str, gain: str, low: float, high: float, unit: str) -> Dimension:
+    return Dimension(f'xy.{gain}', (f'{section}.axes.x.{gain}', f'{section}.axes.y.{gain}'), low, high, unit)
+
+
+def _z(section: str, gain: str, low: float, high: float, unit: str) -> Dimension:
+    return Dimension(f'z.{gain}', (f'{section}.axes.z.{gain}',), low, high, unit)
+
+
+#: controller kind -> its search space (units as the gains file states them)
+SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
+    'nnit2fsmc': (
+        _xy('nnit2fsmc', 'input_scale', 0.3, 6.0, 'm/s (S at which the fuzzy input saturates)'),
+        _xy('nnit2fsmc', 'fuzzy_gain', 2.0, 40.0, 'm/s^2'),
+        _xy('nnit2fsmc', 'nn_gain', 1.0, 20.0, 'm/s^2'),
+        _xy('nnit2fsmc', 'learning_rate', 0.1, 10.0, '1/s per (m/s^2)^2'),
+        _z('nnit2fsmc', 'fuzzy_gain', 4.0, 80.0, 'm/s^2'),
+        _z('nnit2fsmc', 'learning_rate', 0.01, 1.0, '1/s per (m/s^2)^2'),
+    ),
+    'pid': (
+        _xy('pid', 'kp', 2.0, 80.0, '1/s^2'),
+        _xy('pid', 'ki', 1.0, 200.0, '1/s^3'),
+        _xy('pid', 'kd', 1.0, 20.0, '1/s'),
+        _z('pid', 'kp', 10.0, 200.0, '1/s^2'),
+        _z('pid', 'ki', 5.0, 200.0, '1/s^3'),
+        _z('pid', 'kd', 3.0, 40.0, '1/s'),
+    ),
+    'se3': (
+        _xy('se3', 'k_error', 2.0, 80.0, '1/s^2'),
+        _xy('se3', 'k_integral', 1.0, 200.0, '1/s^3'),
+        _xy('se3', 'k_rate', 1.0, 20.0, '1/s'),
+        _z('se3', 'k_error', 10.0, 200.0, '1/s^2'),
+        _z('se3', 'k_integral', 5.0, 200.0, '1/s^3'),
+        _z('se3', 'k_rate', 3.0, 40.0, '1/s'),
+    ),
+    'smc-integral': (
+        _xy('smc_integral', 'slope', 1.0, 20.0, '1/s (boundary-layer slope)'),
+        _xy('smc_integral', 'integral_gain', 0.2, 50.0, '1/s^2'),
+        _xy('smc_integral', 'switching_gain', 1.0, 40.0, 'm/s^2'),
+        _z('smc_integral', 'slope', 3.0, 40.0, '1/s'),
+        _z('smc_integral', 'integral_gain', 0.2, 50.0, '1/s^2'),
+        _z('smc_integral', 'switching_gain', 0.5, 20.0, 'm/s^2'),
+    ),
+    'l1-se3': (    # the se3 law it augments, and its L1 translational loop (the campaigns' wind and mass)
+        _xy('se3', 'k_error', 2.0, 80.0, '1/s^2'),
+        _xy('se3', 'k_integral', 1.0, 200.0, '1/s^3'),
+        _xy('se3', 'k_rate', 1.0, 20.0, '1/s'),
+        _z('se3', 'k_error', 10.0, 200.0, '1/s^2'),
+        Dimension('l1.predictor_pole_translation', ('l1_se3.predictor_pole_translation',), 0.5, 50.0, '1/s'),
+        Dimension('l1.cutoff_translation_hz', ('l1_se3.cutoff_translation_hz',), 0.5, 50.0, 'Hz'),
+    ),
+    'indi': (
+        _xy('indi', 'k_error', 2.0, 80.0, '1/s^2'),
+        _xy('indi', 'k_rate', 1.0, 20.0, '1/s'),
+        _z('indi', 'k_error', 10.0, 200.0, '1/s^2'),
+        _z('indi', 'k_rate', 3.0, 40.0, '1/s'),
+        Dimension('indi.acceleration_filter_hz', ('indi.acceleration_filter_hz',), 2.0, 60.0, 'Hz'),
+        Dimension('indi.effectiveness_rate', ('indi.effectiveness_rate',), 0.005, 0.5, '- (normalised LMS step)'),
+    ),
+}
+
+
+def search_space(kind: str) -> tuple[Dimension, ...]:
+    """The search space of ``kind``; ParameterError naming the kinds that have one."""
+    if kind not in SEARCH_SPACES:
+        raise ParameterError(f'--controller: {kind!r} has no search space (tunable: {", ".join(SEARCH_SPACES)}; '
+                             'nnit2fsmc_controller/search_spaces.py declares them)')
+    return SEARCH_SPACES[kind]
+
+
+def _node(tree: Mapping[str, Any], dotted: str) -> tuple[dict, str]:
+    """The mapping that holds ``dotted``'s last key, and that key; ParameterError if a section is missing."""
+    *sections, key = dotted.split('.')
+    node = tree
+    for section in sections:
+        if not isinstance(node, Mapping) or section not in node:
+            raise ParameterError(f'{dotted}: missing from the gains (its search dimension cannot be set)')
+        node = node[section]
+    if key not in node:
+        raise ParameterError(f'{dotted}: missing from the gains (its search dimension cannot be set)')
+    return node, key
+
+
+def values_in(gains: Mapping[str, Any], kind: str) -> dict[str, float]:
+    """The point of ``kind``'s search space that ``gains`` (a gains tree) is: each dimension's value.
+
+    ParameterError if the gains a dimension ties together differ (such gains are not a point of the
+    space), or lie outside its range.
+    """
+    values = {}
+    for dimension in search_space(kind):
+        found = {float(node[key]) for node, key in (_node(gains, name) for name in dimension.gains)}
+        if len(found) != 1:
+            raise ParameterError(f'{", ".join(dimension.gains)}: tuning sets them to one value ({dimension.name}); '
+                                 f'the gains give {sorted(found)}')
+        value = found.pop()
+        if not dimension.low <= value <= dimension.high:
+            raise ParameterError(f'{dimension.gains[0]}: {value:g} is outside the search range of {dimension.name} '
+                                 f'[{dimension.low:g}, {dimension.high:g}] {dimension.unit}')
+        values[dimension.name] = value
+    return values
+
+
+def with_values(gains: Mapping[str, Any], kind: str, values: Mapping[str, float]) -> dict:
+    """A copy of ``gains`` with every dimension of ``kind``'s space set to ``values[dimension.name]``."""
+    tuned = copy.deepcopy(dict(gains))
+    for dimension in search_space(kind):
+        for name in dimension.gains:
+            node, key = _node(tuned, name)
+            node[key] = float(values[dimension.name])
+    return tuned

@@ -1,0 +1,216 @@
+"""run_stack.py tune and stress: clients of the campaign runner (docs/TUNING.md).
+
+The campaigns fly on an in-process Dask cluster (what --scheduler names), so the tests pay no worker
+start-up; the flights are few and short."""
+import csv
+import math
+
+import distributed
+import numpy as np
+import pytest
+import yaml
+
+from flight_stack.campaign.results import read_flights, wilson_interval
+from flight_stack.campaign.runner import RunOptions, run_campaign
+from flight_stack.campaign.sampling import sample_conditions
+from flight_stack.campaign.spec import parse_spec
+from flight_stack.campaign.stress import KINDS, StressSetup, Tally, find_breaking_point, highest_intensity, stress
+from flight_stack.campaign.tune import TuneSetup, objective, tune
+from nnit2fsmc_controller.factory import build_controller, load_gains
+from nnit2fsmc_controller.search_spaces import SEARCH_SPACES, values_in, with_values
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+
+DOCUMENT = {'scenario': 'paper', 'duration': 2.0, 'settle_time': 1.2, 'controllers': ['pid'], 'flights': 3,
+            'seed': 0, 'control_rate_hz': 250, 'physics_rate_hz': 500,
+            'vehicle': {'mass': 0.1}, 'wind': {'mean_speed_mps': 1.0, 'turbulence': 'light'}}
+SPEC = parse_spec(DOCUMENT)
+#: the stress test's: no wind, settled longer (a 2 s flight's take-off transient is near 10 cm RMSE)
+CALM = parse_spec({**{k: v for k, v in DOCUMENT.items() if k != 'wind'}, 'duration': 2.5, 'settle_time': 1.6})
+
+
+@pytest.fixture(scope='module')
+def scheduler():
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        yield cluster.scheduler_address
+
+
+# --- search spaces and the objective -------------------------------------------------------------
+
+@pytest.mark.parametrize('kind', sorted(SEARCH_SPACES))
+def test_every_search_space_holds_the_packaged_gains_and_sets_what_it_names(kind):
+    gains = load_gains()
+    start = values_in(gains, kind)                       # refused if outside a range or x != y
+    moved = {name: value * 1.1 for name, value in start.items()}
+    tuned = with_values(gains, kind, moved)
+    assert values_in(tuned, kind) == pytest.approx(moved)
+    assert values_in(gains, kind) == start               # the copy, not the packaged tree, changed
+    build_controller(kind, load_vehicle_file()[0], tuned)
+
+
+def test_a_space_refuses_gains_it_cannot_express():
+    gains = load_gains()
+    gains['pid']['axes']['y']['kp'] = 13.0               # x and y share one dimension
+    with pytest.raises(ParameterError, match='pid.axes.x.kp, pid.axes.y.kp'):
+        values_in(gains, 'pid')
+    with pytest.raises(ParameterError, match='no search space'):
+        values_in(gains, 'smc-sign')
+
+
+def test_the_objective_is_the_median_with_failures_and_penalises_below_99_percent():
+    def rows(rmse, failed):
+        return ([{'finished': True, 'rmse_position_m': r} for r in rmse]
+                + [{'finished': False, 'rmse_position_m': math.nan}] * failed)
+    assert objective(rows([0.01, 0.03, 0.02], 0), 1.0).objective_m == pytest.approx(0.02)
+    # 1 failure in 200 (99.5 % finished): counted as max_error_m in the median, no penalty
+    score = objective(rows([0.02] * 199, 1), 1.0)
+    assert score.objective_m == pytest.approx(0.02) and score.finished == 199
+    # 2 in 100 (98 %): worse than any gains that finish 99 %, ranked by the share finished
+    assert objective(rows([0.02] * 98, 2), 1.0).objective_m == pytest.approx(1.02)
+    assert objective(rows([0.02] * 97, 3), 1.0).objective_m > objective(rows([0.5] * 98, 2), 1.0).objective_m
+    # most flights failed: the median is the failure value
+    assert objective(rows([0.02], 2), 0.5).median_rmse_m == 0.5
+
+
+# --- tune ----------------------------------------------------------------------------------------
+
+def test_tune_writes_gains_no_worse_than_the_start_on_the_same_flights_and_resumes(scheduler, tmp_path):
+    out = tmp_path / 'tune'
+    options = RunOptions(scheduler=scheduler)
+    setup = TuneSetup('pid', SPEC, seeds=(1,), trials=2, out_dir=out, options=options, sampler_seed=3)
+    first = tune(setup, progress=False)
+    assert first.trials == 2 and first.best_objective_m <= first.starting_objective_m
+
+    gains_file = out / 'gains-pid.yaml'
+    gains = load_gains(gains_file)                      # what --gains reads
+    build_controller('pid', load_vehicle_file()[0], gains)
+    with (out / 'trials-pid.csv').open() as stream:
+        table = list(csv.DictReader(stream))
+    assert [row['trial'] for row in table] == ['0', '1'] and table[0]['starting_gains'] == 'True'
+    best = min((row for row in table if row['state'] == 'complete'), key=lambda row: float(row['objective_m']))
+    assert values_in(gains, 'pid') == pytest.approx({name: float(best[name]) for name in values_in(gains, 'pid')})
+
+    # the tuned gains and the packaged ones flown again, as plain campaigns on the same flights
+    def flown(gains_path, folder):
+        run_campaign(SPEC.overridden(seed=1), tmp_path / folder,
+                     RunOptions(scheduler=scheduler, progress=False, report=False, gains_file=gains_path))
+        return objective(read_flights(tmp_path / folder / 'flights.csv'), SPEC.max_error_m).objective_m
+    tuned, packaged = flown(str(gains_file), 'tuned'), flown(None, 'packaged')
+    assert tuned == pytest.approx(first.best_objective_m) and packaged == pytest.approx(first.starting_objective_m)
+    assert tuned <= packaged
+
+    # the same command again with a larger budget continues the study: one more trial, none flown again
+    folders = set((out / 'campaigns').iterdir())
+    second = tune(TuneSetup('pid', SPEC, seeds=(1,), trials=3, out_dir=out, options=options, sampler_seed=3),
+                  progress=False)
+    assert second.trials == 3 and second.starting_objective_m == first.starting_objective_m
+    assert len(set((out / 'campaigns').iterdir()) - folders) == 1
+    # another spec in the same folder is refused
+    with pytest.raises(ParameterError, match='another spec'):
+        tune(TuneSetup('pid', SPEC.overridden(flights=2), seeds=(1,), trials=3, out_dir=out, options=options),
+             progress=False)
+
+
+# --- stress --------------------------------------------------------------------------------------
+
+def synthetic(threshold: float, flights: int = 400):
+    """A success share falling smoothly through 90 % at ``threshold``; the intensities it was asked for."""
+    asked = []
+
+    def rate_at(x: float) -> Tally:
+        asked.append(x)
+        share = 1.0 / (1.0 + math.exp((x - threshold) / 0.4 - math.log(9.0)))   # 0.9 exactly at threshold
+        return Tally(int(math.floor(share * flights)), flights)
+    return rate_at, asked
+
+
+def test_the_bisection_finds_the_threshold_of_a_synthetic_curve():
+    rate_at, asked = synthetic(7.3)
+    point = find_breaking_point(rate_at, 0.0, 20.0, 0.25)
+    assert point.status == 'found'
+    assert point.low < 7.3 <= point.high and point.high - point.low <= 0.25 + 1e-12
+    assert len(asked) == len(set(asked)) <= 2 + math.ceil(math.log2(20.0 / 0.25))
+    assert point.tries[point.low].share >= 0.9 > point.tries[point.high].share
+    assert point.value == point.high
+
+
+def test_the_bisection_says_when_the_range_holds_no_breaking_point():
+    above, _ = synthetic(30.0)
+    point = find_breaking_point(above, 0.0, 20.0, 0.25)
+    assert point.status == 'above_range' and point.value == 20.0 and len(point.tries) == 2
+    below, _ = synthetic(-1.0)
+    point = find_breaking_point(below, 0.0, 20.0, 0.25)
+    assert point.status == 'at_or_below_low' and point.value == 0.0 and len(point.tries) == 1
+
+
+def test_a_fixed_disturbance_is_the_same_for_every_flight():
+    nominal = load_vehicle_file()[0]
+    spec = KINDS['mass'].fixed(SPEC, 1.4)
+    assert {round(sample_conditions(spec, nominal, k).vehicle.m / nominal.m, 12) for k in range(5)} == {1.4}
+    spec = KINDS['rotor-loss'].fixed(SPEC, 0.3)
+    loss = sample_conditions(spec, nominal, 2).vehicle.rotor_efficiency_loss
+    assert loss == pytest.approx((0.3, 0.0, 0.0, 0.0))
+    # the spec as written to spec.yaml reads back the same
+    assert parse_spec(spec.to_mapping()).vehicle == spec.vehicle
+    # and the draws of every other key are unchanged by the new key
+    assert sample_conditions(spec, nominal, 2).vehicle.Ix == sample_conditions(SPEC, nominal, 2).vehicle.Ix
+
+
+def test_stress_runs_on_a_tiny_real_campaign(scheduler, tmp_path):
+    kind = KINDS['mass']
+    options = RunOptions(scheduler=scheduler)
+    # the packaged vehicle's rotors hold up 2.25 times its mass: the highest try on a 0.6 grid is 1.8
+    assert highest_intensity(kind, CALM, options, 0.6) == pytest.approx(1.8)
+    setup = StressSetup(CALM, kind, ('pid',), tmp_path, options, 1.0, 2.2, 0.6)
+    points = stress(setup, progress=False)
+    point = points['pid']
+    # nominal mass: every flight succeeds; 2.2 times the mass needs 98 % of full thrust to hover
+    assert point.tries[1.0].successes == 3 and point.tries[2.2].successes == 0
+    assert point.status == 'found' and sorted(point.tries) == [1.0, 1.6, 2.2]
+    assert point.value == (1.6 if point.tries[1.6].share < 0.9 else 2.2)
+    with (tmp_path / 'breaking_points.csv').open() as stream:
+        rows = list(csv.DictReader(stream))
+    assert [(r['kind'], r['controller'], r['status']) for r in rows] == [('mass', 'pid', 'found')]
+    assert float(rows[0]['breaking_point']) == point.value
+    with (tmp_path / 'stress-mass.csv').open() as stream:
+        tries = list(csv.DictReader(stream))
+    for row in tries:
+        low, high = wilson_interval(int(row['successes']), int(row['flights']))
+        assert (float(row['wilson95_low']), float(row['wilson95_high'])) == pytest.approx((low, high))
+    assert (tmp_path / 'stress-mass.png').stat().st_size > 0
+
+
+@pytest.mark.parametrize('vehicle, message', [
+    ({'mass': {'dist': 'fixed', 'value': -1.0}}, r'vehicle.mass.value: .*\(-1.0, inf'),
+    ({'mass': {'dist': 'fixed'}}, 'vehicle.mass.value: missing'),
+    ({'one_rotor_efficiency_loss': {'dist': 'fixed', 'value': -0.1}}, 'a loss is a fraction'),
+    ({'one_rotor_efficiency_loss': {'dist': 'fixed', 'value': 1.0}}, 'cannot lose all of its thrust'),
+    ({'mass': {'dist': 'constant', 'value': 0.2}}, 'uniform, normal, fixed'),
+])
+def test_a_fixed_value_the_vehicle_cannot_take_is_refused_naming_the_key(vehicle, message):
+    with pytest.raises(ParameterError, match=message):
+        parse_spec({**DOCUMENT, 'vehicle': vehicle})
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['tune', '--controller', 'pid', '--trials', '2', '--seeds', '1,x'], '--seeds'),
+    (['tune', '--controller', 'smc-sign', '--trials', '2'], 'no search space'),
+    (['tune', '--controller', 'pid', '--trials', '0'], '--trials'),
+    (['stress', '--kind', 'mass', '--high', '2.5'], '--high: 2.5 is above'),
+    (['stress', '--kind', 'wind', '--low', '5', '--high', '5'], '--low, --high'),
+])
+def test_the_commands_refuse_bad_options_before_flying(tmp_path, capsys, argv, message):
+    from flight_stack.cli import run
+    spec = tmp_path / 'spec.yaml'
+    spec.write_text(yaml.safe_dump(DOCUMENT))
+    assert run([*argv, str(spec), '--out', str(tmp_path / 'out')]) == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / 'out').exists()
+
+
+def test_every_search_space_is_a_controller_kind():
+    from nnit2fsmc_controller.factory import CONTROLLERS
+    assert set(SEARCH_SPACES) <= set(CONTROLLERS)
+    assert {'nnit2fsmc', 'pid', 'se3', 'smc-integral'} <= set(SEARCH_SPACES)
+    # the same budget: every kind searches the same number of dimensions
+    assert len({len(space) for space in SEARCH_SPACES.values()}) == 1
