@@ -227,6 +227,7 @@ def test_lemniscate_is_a_fast_figure_eight_and_a_scenario():
     assert lemniscate.initial_state[2] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('trajectory', [Helix(), Lemniscate()], ids=lambda t: type(t).__name__)
 def test_flatness_rates_are_the_time_derivatives_of_the_eq10_attitude(trajectory):
     """Along a noise-free reference (commanded acceleration = reference acceleration, yaw = reference
