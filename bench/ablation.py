@@ -49,10 +49,11 @@ CHANGES = {
     'learning rates per second (retuned)': ('nnit2fsmc.learning_rate_unit',) + LEARNING,
     'sigma-modification': ('nnit2fsmc.modification',),
     'measurement stage': ('common.measurement_filter_hz', 'common.velocity_filter_hz'),
-    'take-off hold': ('nnit2fsmc.takeoff_height',),
+    'take-off hold': ('common.takeoff_height',),
     'x, y acceleration feed-forward': ('nnit2fsmc.acceleration_feedforward',),
     'x, y network cap 5 m/s^2, initial weights +-1': ('nnit2fsmc.axes.x.nn_gain', 'nnit2fsmc.axes.y.nn_gain',
                                                       'nnit2fsmc.initial_weight_spread'),
+    'x, y adaptation-rate bound 4 /s': ('nnit2fsmc.axes.x.max_adaptation_rate', 'nnit2fsmc.axes.y.max_adaptation_rate'),
 }
 DELAY_STEPS = 20          #: [control steps at 1 kHz] = 20 ms
 MOTOR_LAG = 0.030         #: [s]

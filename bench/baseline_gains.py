@@ -14,9 +14,9 @@ NNIT2FSMC gains, of the vehicle or of the campaign:
    input_scale: stiffer than the IT2 term near S = 0 by about 21 %). ``rmse`` and ``chattering``:
    the slope matching scaled by the factor c per baseline kind (every axis alike) at which the
    baseline's nominal paper flight has the NNIT2FSMC's RMSE, or its total chattering (bisection
-   on log c over [1/16, 16], ``MATCH_STEPS`` flights per kind). Divided into the units of q'' by the
-   nominal control gain b of the subsystem (x, y: 1; z: 1/m; phi, theta: d/Ix, d/Iy; psi: 1/Iz):
-       k = c slope fuzzy_gain / input_scale * b    [1/s],   kd = k,   kp = lambda k,   ki = k lambda^2 / 4
+   on log c over [1/16, 16], ``MATCH_STEPS`` flights per kind). fuzzy_gain is stated in units of q''
+   (nnit2fsmc_controller/gain_units.py), so the slope is already a gain on S in those units:
+       k = c slope fuzzy_gain / input_scale    [1/s],   kd = k,   kp = lambda k,   ki = k lambda^2 / 4
    (the PID is then k (de + lambda e + lambda^2/4 int e): the NNIT2FSMC's surface plus an integral
    whose surface polynomial s^2 + lambda s + lambda^2/4 has a double root at lambda/2).
 2. Uncertainty bound of the campaign, per subsystem, in units of q'' (docs/BASELINES.md, section 2).
@@ -95,15 +95,13 @@ def fuzzy_slope(gains, matching: str = 'slope') -> float:
     return small_signal_slope(n['lower_height'], n['lower_half_width'], n['type_reducer'])
 
 
-def matched(gains, params, slope, scale: float = 1.0):
+def matched(gains, slope, scale: float = 1.0):
     """{axis: (k, kp, kd, ki)} of step 1, k scaled by ``scale`` (c)."""
-    b = {'x': 1.0, 'y': 1.0, 'z': 1.0 / params.m, 'phi': params.d / params.Ix, 'theta': params.d / params.Iy,
-         'psi': 1.0 / params.Iz}
     out = {}
     for axis in AXES:
         a = gains['nnit2fsmc']['axes'][axis]
         lam = gains['common']['lambda'][axis]
-        k = scale * slope * a['fuzzy_gain'] / a['input_scale'] * b[axis]
+        k = scale * slope * a['fuzzy_gain'] / a['input_scale']
         out[axis] = (k, lam * k, k, k * lam * lam / 4.0)
     return out
 
@@ -157,7 +155,7 @@ def derive(gains, params, disturbances, spec, slope=None, scales=None):
     delta = max(1.0 / r_min - 1.0, 1.0 - 1.0 / r_max)
     rows, sections = [], {section: {} for section in SECTIONS.values()}
     for kind, section in SECTIONS.items():
-        gains_of = matched(gains, params, slope, scales[kind])
+        gains_of = matched(gains, slope, scales[kind])
         for axis in AXES:
             k, kp, kd, ki = gains_of[axis]
             f, terms = bound[axis]

@@ -62,7 +62,6 @@ import paper_tables  # noqa: E402
 from baseline_gains import fuzzy_slope  # noqa: E402
 from nnit2fsmc_controller.controller import AXES  # noqa: E402
 from nnit2fsmc_controller.factory import control_period, load_gains  # noqa: E402
-from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
 
 CONTROLLERS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral')
 MOTOR_LAG = 0.030        #: [s] the example campaign's motor time constant
@@ -74,13 +73,7 @@ POSITION_AXES = ('x', 'y', 'z')
 
 # --- linearised loops --------------------------------------------------------------------------------
 
-def control_gain(params, axis: str) -> float:
-    """b: the nominal control gain of subsystem ``axis`` (q'' per unit of its control)."""
-    return {'x': 1.0, 'y': 1.0, 'z': 1.0 / params.m, 'phi': params.d / params.Ix, 'theta': params.d / params.Iy,
-            'psi': 1.0 / params.Iz}[axis]
-
-
-def axis_controller(kind: str, axis: str, gains, params):
+def axis_controller(kind: str, axis: str, gains):
     """C(s) of ``kind`` on ``axis`` (module docstring), as a function of the complex s."""
     lam = gains['common']['lambda'][axis]
     f_v = gains['common']['velocity_filter_hz'] if axis in POSITION_AXES else 0.0
@@ -89,7 +82,7 @@ def axis_controller(kind: str, axis: str, gains, params):
         return s if f_v <= 0.0 else s / (1.0 + s / (2.0 * math.pi * f_v))
     if kind == 'nnit2fsmc':
         a = gains['nnit2fsmc']['axes'][axis]
-        k = fuzzy_slope(gains) * a['fuzzy_gain'] / a['input_scale'] * control_gain(params, axis)
+        k = fuzzy_slope(gains) * a['fuzzy_gain'] / a['input_scale']   # fuzzy_gain is in units of q'' (gain_units)
         return lambda s: k * (derivative(s) + lam)
     if kind in ('pid', 'se3'):
         names = ('kp', 'kd', 'ki') if kind == 'pid' else ('k_error', 'k_rate', 'k_integral')
@@ -159,12 +152,12 @@ def loop_margins(loop, low: float = 1e-2, high: float = 1e4, points: int = 20000
             'phase_crossover': phase_crossover}
 
 
-def linear_margins(kind: str, gains, params, motor_lag: float) -> dict:
+def linear_margins(kind: str, gains, motor_lag: float) -> dict:
     """{axis: loop_margins(...)} of ``kind``'s linearised axis loops."""
     p = plant(control_period(gains), motor_lag)
     out = {}
     for axis in AXES:
-        c = axis_controller(kind, axis, gains, params)
+        c = axis_controller(kind, axis, gains)
         out[axis] = loop_margins(lambda s, c=c: c(s) * p(s))
     return out
 
@@ -227,7 +220,6 @@ def main(argv=None) -> int:
     parser.add_argument('--out', type=Path)
     args = parser.parse_args(argv)
     kinds = [k.strip() for k in args.controllers.split(',') if k.strip()]
-    params, _ = load_vehicle_file()
     gains = load_gains(args.gains)
     if args.gains:
         paper_tables.OVERRIDES['gains_file'] = args.gains
@@ -236,7 +228,7 @@ def main(argv=None) -> int:
              'gain margin (axis) | crossover [rad/s] (axis) |', '|---|---:|---:|---:|---:|---:|']
     for kind in kinds:
         for lag in (0.0, MOTOR_LAG):
-            m = linear_margins(kind, gains, params, lag)
+            m = linear_margins(kind, gains, lag)
             worst = min(AXES, key=lambda a: m[a]['delay_margin'])
             gm_axis = min(AXES, key=lambda a: m[a]['gain_margin'])
             pm_axis = min(AXES, key=lambda a: m[a]['phase_margin'])

@@ -12,7 +12,8 @@ Conventions (the paper's, REP 103):
 * reference: :class:`Reference` (position [m], velocity [m/s], acceleration [m/s^2], all world
   ENU; yaw [rad], yaw rate [rad/s], yaw acceleration [rad/s^2]; jerk [m/s^3] and snap [m/s^4],
   zeros if left out, which the default flatness attitude rates use); :func:`hold` holds a point;
-* output: rotor thrusts F1 front, F2 right, F3 back, F4 left [N] within the rotor limits, the
+* output: rotor thrusts F1..F4 [N] in the vehicle's rotor layout (``VehicleParams.rotor_names``; the
+  paper's plus frame: F1 front, F2 right, F3 back, F4 left) within the rotor limits, the
   virtual controls U1 [N], U2 [N], U3 [N], U4 [N m] of the paper's eq. (2) they realise, and per
   subsystem (x, y, z, phi, theta, psi) the sliding surface, equivalent and corrective terms.
 
@@ -40,7 +41,8 @@ __all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'F
 
 
 def load_vehicle(path: str | Path | None = None) -> VehicleParams:
-    """The vehicle description (paper Table I, SI units) of a vehicle YAML; None: the packaged one."""
+    """The vehicle description (paper Table I, SI units) of a vehicle YAML or of a shipped vehicle by name
+    ('paper', 'crazyflie', 'hummingbird', 'x500': docs/VEHICLES.md); None: the packaged one (the paper's)."""
     return load_vehicle_file(path)[0]
 
 
@@ -59,7 +61,8 @@ def make_controller(kind: str = 'nnit2fsmc', vehicle: VehicleParams | str | Path
 
 def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
         disturbances: bool | None = None, seed: int = 0, vehicle: VehicleParams | str | Path | None = None,
-        gains: str | Path | None = None, physics_rate: float = 1000.0, settle_time: float | None = None,
+        gains: Mapping[str, Any] | str | Path | None = None, physics_rate: float = 1000.0,
+        settle_time: float | None = None,
         max_error: float = 1.0, out: str | Path | None = None, overwrite: bool = False,
         true_vehicle: VehicleParams | str | Path | None = None, wind: Mapping | None = None,
         sensor_noise: Mapping | None = None, delay_s: float = 0.0, motor_time_constant_s: float = 0.0,
@@ -70,7 +73,8 @@ def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: flo
     ``summary``, the content of ``summary.json`` (rmse_position_m, max_position_error_m, chattering, ...).
 
     ``vehicle`` is the controller's nominal model (a VehicleParams or a vehicle YAML; None: the packaged
-    one). The world, as a campaign spec's keys of the same names mean it (docs/CAMPAIGNS.md), checked by
+    one); ``gains`` a whole gains mapping (as :func:`make_controller` takes it) or a gains YAML (None: the
+    packaged one). The world, as a campaign spec's keys of the same names mean it (docs/CAMPAIGNS.md), checked by
     the same code:
 
     * ``true_vehicle``: the vehicle the simulator flies (VehicleParams or YAML; None: the nominal one);
@@ -79,9 +83,10 @@ def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: flo
     * ``sensor_noise``: ``{position_m: 0.01, velocity_mps: 0.02, attitude_rad: 0.01, body_rate_radps: 0.02}``
       (white-noise standard deviations, or ``{std: s, bias_std: b}``);
     * ``delay_s`` [s] (whole control steps) and ``motor_time_constant_s`` [s] (first-order motor lag);
-    * ``mass_change``: ``{at_s: 20.0, mass_kg: 1.3}``, a payload picked up or dropped at sim time at_s;
+    * ``mass_change``: ``{at_s: 20.0, mass_kg: 1.3}``, a payload picked up or dropped at sim time at_s
+      (before the flight's end);
     * ``rotor_efficiency_loss``: ``{at_s: 10.0, loss: [0.2, 0, 0, 0]}``, lost thrust fractions of F1..F4
-      from at_s on.
+      from at_s on (before the flight's end).
 
     With ``out`` the run is written as ``run_stack.py --out`` writes it (summary, bag, review), and
     ``read_flight(out / 'bag')`` gives the same flight back; without it nothing is written. Raises

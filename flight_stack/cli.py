@@ -16,7 +16,7 @@ Examples:
   python3 run_stack.py --controller smc-sign --out out/sign   # same disturbances, to compare
   python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
-Subcommands (each has its own --help): campaign, and the bag tools review, recover, rosbag2-qos (below).
+Subcommands (each has its own --help): campaign, and the bag tools review, recover, export, rosbag2-qos (below).
   python3 run_stack.py campaign SPEC.yaml --out DIR      # a robustness campaign (docs/CAMPAIGNS.md);
                                                          #   the shipped specs: run_stack.py campaign --list
 
@@ -27,6 +27,7 @@ control rate; --speed-factor at most 1000; --extra-subscribers at most 100; --du
 Bag tools (docs/BAGS.md), the same as `ros2 run quad_msgs_bridge review|recover|rosbag2_qos`:
   python3 run_stack.py review out/paper-nnit2fsmc/bag --compare out/sign/bag
   python3 run_stack.py recover BAG                       # finalize the bag of a killed recording
+  python3 run_stack.py export BAG --format csv --out flight.csv  # one row per step, columns with units
   python3 run_stack.py rosbag2-qos --namespace quad > qos.yaml   # for your own `ros2 bag record
                                                          #   --qos-profile-overrides-path qos.yaml`
 """
@@ -52,6 +53,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     from nnit2fsmc_controller.factory import CONTROLLERS
     from nnit2fsmc_controller.trajectory import SCENARIOS
     from quad_msgs_bridge.contract import RECORDED_TOPICS
+    from quad_msgs_bridge.output_path import output_path
     from flight_stack.fleet import MAX_VEHICLES
 
     parser = argparse.ArgumentParser(description=__doc__,
@@ -64,12 +66,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument('--disturbances', action=argparse.BooleanOptionalAction, default=None,
                         help='paper section IV disturbances (default: as in the vehicle file, on)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the NN initial weights, 0 to 2^31 - 1')
-    parser.add_argument('--out', type=Path, default=None,
+    parser.add_argument('--out', type=output_path, default=None,
                         help='output folder (default out/<scenario>-<controller>); see above for what a run leaves')
     parser.add_argument('--overwrite', action='store_true',
                         help='replace an earlier run in --out (its summary, bag, report, plots; other files stay) '
                              'and an existing --bag')
-    parser.add_argument('--vehicle', type=Path, default=None, help='vehicle YAML (default: the packaged one)')
+    parser.add_argument('--vehicle', type=Path, default=None,
+                        help='vehicle YAML, or a shipped vehicle by name: paper (the default), crazyflie, hummingbird, x500')
     parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
     parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz], a multiple of the control rate')
     parser.add_argument('--settle-time', type=float, default=None,
@@ -84,19 +87,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help='fly N vehicles (at most %d) on one sim clock, uav1..uavN, each its own copy of the scenario '
                              'shifted 3 m along y from the previous one (ROS: one simulator, a controller and a '
                              'trajectory node per vehicle; embedded: the fleet stepped as one batch)' % MAX_VEHICLES)
-    parser.add_argument('--mode', choices=('lockstep', 'realtime'), default='lockstep',
-                        help='ROS backend: lockstep (deterministic) or realtime simulation')
+    parser.add_argument('--mode', choices=('lockstep', 'realtime'), default=None,
+                        help='ROS backend: lockstep (deterministic, the default) or realtime simulation')
     parser.add_argument('--speed-factor', type=float, default=None,
                         help='sim s per wall s (default 1: real time) of the ROS backend\'s realtime mode and of '
                              'the --live view; with --live 0 flies as fast as it can')
     parser.add_argument('--extra-subscribers', type=int, default=0, metavar='N',
                         help='ROS backend: the simulator also waits for N more odom subscribers before it starts '
                              '(your own `ros2 bag record`, RViz), so they miss nothing of a lockstep flight')
-    parser.add_argument('--record-by', choices=('recorder', 'publishers'), default='publishers',
+    parser.add_argument('--record-by', choices=('recorder', 'publishers'), default=None,
                         help='ROS backend: who writes the bag: each node logging what it publishes, merged into '
                              'the bag after the flight (the default), or the record node (one more DDS reader of '
                              'every topic: a lockstep step about 35 %% slower; docs/BAGS.md)')
-    parser.add_argument('--bag', type=Path, default=None,
+    parser.add_argument('--bag', type=output_path, default=None,
                         help='record the flight into this rosbag2 (MCAP) folder (default OUT/bag); '
                              'then review it into OUT (report.html, plots/)')
     parser.add_argument('--no-bag', action='store_true', help='record no bag (and write no report)')
@@ -129,6 +132,36 @@ def choose_backend(requested: str, live: bool) -> str:
     return 'ros'
 
 
+def check_count(option: str, value: int, low: int, high: int) -> int:
+    """``value`` if it is a whole number in [low, high], else a ParameterError naming ``option`` and the range."""
+    from quad_msgs_bridge.vehicle_params import ParameterError
+    if not low <= value <= high:
+        raise ParameterError(f'{option}: {value} is outside the valid range {low} to {high} (a whole number)')
+    return value
+
+
+def check_backend_options(args, backend: str) -> None:
+    """The ROS backend can be started (rclpy imports), and no option of the other backend is given: each
+    refused with a ParameterError naming it, before anything starts. Sets the ROS options' defaults."""
+    from quad_msgs_bridge.vehicle_params import ParameterError
+    if backend == 'ros':
+        try:
+            import rclpy  # noqa: F401
+        except ImportError as error:
+            raise ParameterError(f'--backend ros: rclpy cannot be imported ({error}); source '
+                                 '/opt/ros/jazzy/setup.bash first, or fly with --backend embedded') from None
+        args.mode = args.mode or 'lockstep'
+        args.record_by = args.record_by or 'publishers'
+        return
+    ros_only = [(option, value) for option, value in (('--mode', args.mode), ('--record-by', args.record_by),
+                                                      ('--extra-subscribers', args.extra_subscribers or None))
+                if value is not None]
+    if ros_only:
+        option, value = ros_only[0]
+        raise ParameterError(f'{option} {value}: an option of the ROS backend, which the embedded backend would '
+                             'ignore; fly with --backend ros, or leave it out')
+
+
 def check_live_options(args, backend: str) -> float:
     """The speed factor of an embedded flight (0: as fast as it can), after checking the live-view options."""
     from quad_msgs_bridge.vehicle_params import ParameterError, check_number
@@ -145,7 +178,7 @@ def check_live_options(args, backend: str) -> float:
             raise ParameterError('--speed-factor: the embedded flight is paced only with --live (without it, it '
                                  'flies as fast as it can)')
         return 0.0
-    check_number('--live-port', args.live_port, 0, 65535)
+    check_count('--live-port', args.live_port, 0, 65535)
     return check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor, 0.0, 1000.0)
 
 
@@ -212,11 +245,20 @@ class Flown:
     failure_time_s: float | None = None   #: [s] sim time at which it failed
 
 
+def planned_run(plan) -> dict[str, str]:
+    """The bag's custom data of what the run planned (its length [s] and --max-error [m]), from which a review
+    tells a flight that ended early or failed its checks (quad_msgs_bridge.review.verdict)."""
+    from quad_msgs_bridge.bag.flight_bag import DURATION_KEY, MAX_ERROR_KEY
+    return {DURATION_KEY: repr(float(plan.duration)), MAX_ERROR_KEY: repr(float(plan.max_error))}
+
+
 def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = False, live_view=None,
-             speed_factor: float = 0.0, live_wait: bool = False) -> Flown:
-    """The embedded backend; with ``bag``, the flight to review is the one in memory (what the bag holds)."""
+             speed_factor: float = 0.0, live_wait: bool = False, namespace: str | None = None) -> Flown:
+    """The embedded backend; with ``bag`` (its topics under ``namespace``, None: the default one), the flight to
+    review is the one in memory (what the bag holds)."""
     from flight_stack.closed_loop import FailureRules
     from flight_stack.embedded import fly_embedded
+    from flight_stack.fleet import fleet_layout
     from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
 
     with stop_signals(), live_view.server if live_view else contextlib.nullcontext():
@@ -227,7 +269,8 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
         with deferred():
             recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
                                           controller=plan.controller, scenario=plan.scenario, backend='embedded',
-                                          seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled))
+                                          seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled),
+                                          namespace=fleet_layout(1, namespace)[0].namespace, **planned_run(plan))
                          if bag else contextlib.nullcontext())
         with closed_whole(recording) as written:
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
@@ -259,7 +302,8 @@ def fly_fleet_here(args, plan, bag: Path | None, bag_shown: Path | None) -> list
             recording = (FleetBag.create(bag, plan.params, plan.settle_time, [v.namespace for v in vehicles],
                                          topics=plan.topics, controller=plan.controller, scenario=plan.scenario,
                                          backend='embedded', seed=plan.seed,
-                                         disturbances=disturbances_label(plan.disturbances.enabled))
+                                         disturbances=disturbances_label(plan.disturbances.enabled),
+                                         **planned_run(plan))
                          if bag else contextlib.nullcontext())
         with closed_whole(recording) as written:
             results = fly_fleet(plan.controller, trajectories, plan.params, plan.disturbances, plan.gains,
@@ -293,10 +337,10 @@ def fly_on_ros(args, plan, bag: Path, bag_shown: Path | None) -> list[tuple[str,
         control_rate=plan.control_rate, bag=bag,
         topics=[t.name for t in plan.topics], mode=args.mode, speed_factor=args.speed_factor,
         extra_odom_subscribers=args.extra_subscribers, vehicle_file=args.vehicle, gains_file=args.gains,
-        settle_time=plan.settle_time, quiet=args.quiet, record_by=args.record_by))
+        settle_time=plan.settle_time, quiet=args.quiet, record_by=args.record_by, max_error=plan.max_error))
     if result.failed_node:
         raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
-                            + (f'; the bag is closed: {bag}' if bag_shown else ''),
+                            + (f'; the bag is closed: {bag}' if bag_shown and bag.exists() else ''),
                             130 if result.failed_node == 'interrupted' else 1)
     flights = []
     for vehicle in vehicles:
@@ -375,6 +419,9 @@ def run(argv: list[str]) -> int:
     if argv[:1] == ['campaign']:
         from flight_stack.campaign.cli import main as campaign_main
         return campaign_main(argv[1:])
+    if argv[:1] == ['export']:
+        from flight_stack.export import main as export_main
+        return export_main(argv[1:])
     args = parse_args(argv)
     if not args.quiet:
         print('planning the flight', flush=True)
@@ -387,12 +434,13 @@ def run(argv: list[str]) -> int:
                            seed=args.seed, vehicle_file=args.vehicle, gains_file=args.gains,
                            physics_rate=args.physics_rate, settle_time=args.settle_time, max_error=args.max_error,
                            topics=args.topics)
-        check_number('--extra-subscribers', args.extra_subscribers, 0.0, 100.0)
-        check_number('--vehicles', args.vehicles, 1, MAX_VEHICLES)
+        check_count('--extra-subscribers', args.extra_subscribers, 0, 100)
+        check_count('--vehicles', args.vehicles, 1, MAX_VEHICLES)
         backend = choose_backend(args.backend, args.live)
         if args.live and args.vehicles > 1:
             raise ParameterError('--live: the live view shows one vehicle; fly a fleet without --live')
         speed_factor = check_live_options(args, backend)
+        check_backend_options(args, backend)
         if backend == 'ros':
             args.speed_factor = check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor,
                                              0.0, low_inclusive=False)
@@ -410,6 +458,10 @@ def run(argv: list[str]) -> int:
     except ParameterError as error:
         print(f'error: {error}', file=sys.stderr)
         return 2
+    if output.leftovers:
+        print(f'note: earlier runs into {output.out_dir} that did not finish left '
+              + ', '.join(str(folder) for folder in output.leftovers)
+              + ' (a bag there can be reviewed or recovered; remove them when no longer needed)', file=sys.stderr)
     print(f'flying {plan.controller} on "{plan.scenario}" for {plan.duration:g} s '
           f'(disturbances {"on" if plan.disturbances.enabled else "off"}), {backend} backend'
           + (f', {args.vehicles} vehicles' if args.vehicles > 1 else ''))
@@ -435,7 +487,7 @@ def summarize(flown: Flown, plan, backend: str) -> dict:
                             seed=plan.seed, settle_time=plan.settle_time, params=plan.params,
                             disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
                             wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure,
-                            failure_time_s=flown.failure_time_s)
+                            failure_time_s=flown.failure_time_s, planned_duration_s=plan.duration)
     summary.update(flown.extra)
     return summary
 
@@ -450,8 +502,9 @@ def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = Fa
     from flight_stack.summary import write_summary
     from quad_msgs_bridge.vehicle_params import ParameterError
     plan = plan_flight(controller, scenario, vehicle_file=vehicle, gains_file=gains, **settings)
-    if out is not None and not isinstance(out, (str, Path)):
-        raise ParameterError(f'out: expected a folder path, got {out!r}')
+    if out is not None and (not isinstance(out, (str, Path)) or not str(out).strip()):
+        raise ParameterError(f'out: expected a folder path (None: write nothing; \'.\': the current folder), got '
+                             f'{out!r}')
     if out is None:
         flown = fly_here(plan, None, None)
         flown.data.summary = summarize(flown, plan, 'embedded')
@@ -486,7 +539,7 @@ def fly_and_report(args, plan, backend: str, output, bag_shown: Path | None, liv
             flights = fly_fleet_here(args, plan, output.bag, bag_shown)
         else:
             flights = [(None, fly_here(plan, output.bag, bag_shown, not args.quiet, live_view, speed_factor,
-                                       args.live_wait))]
+                                       args.live_wait, args.namespace))]
     except KeyboardInterrupt:
         return unfinished(output, 'interrupted' + (f'; bag closed: {output.bag}' if output.bag else ''), 130)
     except FlightStopped as stopped:

@@ -7,9 +7,9 @@ A Foxglove WebSocket server (``foxglove-sdk``) serves, per vehicle:
   :class:`LiveView` feeds a :class:`~quad_msgs_bridge.bag.flight_bag.FlightBag` whose writer is the
   server instead of an MCAP file (:class:`LiveTopics`), so the messages are made by the one code that
   makes the bag's;
-* a 3-D scene, ``/<namespace>/scene`` (``foxglove.SceneUpdate``, frame ``odom``): the body (arms,
-  rotors, front rotor red, thrust vectors), the flown path, the reference path and the reference
-  point of the current step.
+* a 3-D scene, ``/<namespace>/scene`` (``foxglove.SceneUpdate``, frame ``odom``): the body (arms and
+  rotors of the vehicle's layout, rotor F1 red, thrust vectors), the flown path, the reference path
+  and the reference point of the current step.
 
 Log times are sim time [ns], as in the bag, and the server announces sim time (Foxglove's Time
 capability), so the app's clock follows the flight. Latched topics (transient local in the contract:
@@ -29,7 +29,7 @@ from typing import Callable, Sequence
 
 import foxglove
 from foxglove.channels import SceneUpdateChannel
-from foxglove.messages import (Color, CubePrimitive, CylinderPrimitive, LinePrimitive, LinePrimitiveLineType, Point3,
+from foxglove.messages import (Color, CylinderPrimitive, LinePrimitive, LinePrimitiveLineType, Point3,
                                Pose, Quaternion, SceneEntity, SceneUpdate, SpherePrimitive, Timestamp, Vector3)
 from foxglove.websocket import ServerListener
 
@@ -237,16 +237,17 @@ _IDENTITY = (0.0, 0.0, 0.0, 1.0)
 class VehicleScene:
     """The scene of one vehicle: body, flown path and reference, as ``foxglove.SceneEntity`` in ``odom``.
 
-    Rotor layout as in ``quad_msgs_bridge/mixer.py`` (body FLU): F1 front (+x), F2 right (-y),
-    F3 back (-x), F4 left (+y), each at the arm length d [m]. A thrust vector is drawn along the
-    body z axis from its rotor, d long at hover thrust m g / 4 [N].
+    Rotors where the vehicle's layout puts them (``VehicleParams.rotor_positions`` [m, body FLU], F1
+    first; in the paper's plus frame F1 front (+x), F2 right (-y), F3 back (-x), F4 left (+y)), an arm
+    from the centre to each. A thrust vector is drawn along the body z axis from its rotor, d long at
+    hover thrust m g / 4 [N].
     """
 
     def __init__(self, params: VehicleParams, namespace: str):
         d = params.d
         self._prefix = namespace.strip('/') or 'vehicle'
         self._arm_length = d
-        self._rotors = ((d, 0.0, 0.0), (0.0, -d, 0.0), (-d, 0.0, 0.0), (0.0, d, 0.0))   # [m, body FLU]
+        self._rotors = params.rotor_positions                                            # [m, body FLU]
         self._thrust_scale = d / (params.m * params.g / 4.0)                             # [m/N]
         self.path: list[Point3] = []            #: flown positions [m, odom], decimated
         self._path_spacing = PATH_SPACING
@@ -287,16 +288,16 @@ class VehicleScene:
         p, q = odometry.position, odometry.orientation
         d, width = self._arm_length, 0.1 * self._arm_length
         rotor_size = Vector3(x=0.8 * d, y=0.8 * d, z=0.2 * width)
-        arms = [CubePrimitive(pose=_pose(p, q), size=Vector3(x=2 * d, y=width, z=width), color=_GREY),
-                CubePrimitive(pose=_pose(p, q), size=Vector3(x=width, y=2 * d, z=width), color=_GREY)]
         geometry = self.rotor_geometry(odometry, forces)
+        centre = _point(p)
+        arms = LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=width, scale_invariant=False,
+                             points=[point for hub, _ in geometry for point in (centre, _point(hub))], color=_GREY)
         rotors = [CylinderPrimitive(pose=_pose(hub, q), size=rotor_size, bottom_scale=1.0, top_scale=1.0,
                                     color=_RED if k == 0 else _BLUE) for k, (hub, _) in enumerate(geometry)]
         thrust = [_point(end) for segment in geometry for end in segment]
-        body = SceneEntity(timestamp=stamp, frame_id=ODOM_FRAME, id=f'{self._prefix}/body', cubes=arms,
-                           cylinders=rotors,
-                           lines=[LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=3.0,
-                                                scale_invariant=True, points=thrust, color=_THRUST_COLOR)])
+        body = SceneEntity(timestamp=stamp, frame_id=ODOM_FRAME, id=f'{self._prefix}/body', cylinders=rotors,
+                           lines=[arms, LinePrimitive(type=LinePrimitiveLineType.LineList, thickness=3.0,
+                                                      scale_invariant=True, points=thrust, color=_THRUST_COLOR)])
         path = SceneEntity(timestamp=stamp, frame_id=ODOM_FRAME, id=f'{self._prefix}/path',
                            lines=[LinePrimitive(type=LinePrimitiveLineType.LineStrip, thickness=2.0,
                                                 scale_invariant=True, points=[*self.path, _point(p)],
@@ -320,7 +321,8 @@ class LiveView:
     def __init__(self, server: LiveServer, params: VehicleParams, namespace: str = DEFAULT_NAMESPACE,
                  topics: Sequence[TopicSpec] = RECORDED_TOPICS):
         self.server = server
-        self._contract = FlightBag(LiveTopics(server, topics, namespace), params.d, namespace)
+        self._contract = FlightBag(LiveTopics(server, topics, namespace), params.d, namespace,
+                                   rotor_names=params.rotor_names)
         self._scene_channel = server.scene_channel(resolve(SCENE, namespace))
         self._scene = VehicleScene(params, namespace)
         self._next_scene = 0.0          # [s, wall, perf_counter]

@@ -15,7 +15,9 @@ A bag given outside ``OUT`` (``--bag``) is a second target, staged and committed
 Two runs into one ``OUT`` at once: :meth:`RunOutput.create` takes an exclusive lock on
 ``.OUT_NAME.lock`` beside ``OUT`` (see :mod:`flight_stack.locking`) and holds it until the run is
 committed or kept as partial, so the second run is refused by name (ParameterError) before it
-flies, and never replaces the first one's result.
+flies, and never replaces the first one's result. Holding that lock, a run knows that every other
+``OUT.incomplete-*`` folder is a leftover of a run that ended: it removes the empty ones and names
+the others (:attr:`RunOutput.leftovers`), which the command prints.
 """
 from __future__ import annotations
 
@@ -85,6 +87,8 @@ class _Target:
 
     def create_staging(self, option: str) -> None:
         parent = self.final.parent
+        if self.entries is not None and self.final.is_dir() and self.final.stat().st_dev != parent.stat().st_dev:
+            parent = self.final      # a mount point: stage on its own file system, so commit can move the entries
         try:
             parent.mkdir(parents=True, exist_ok=True)
             self.staging = _new_folder(parent, self.final.name + STAGING_MARK)
@@ -135,6 +139,7 @@ class RunOutput:
         self._out = _Target(self.out_dir, entries)
         self._overwrite = overwrite
         self._lock: FileLock | None = None
+        self.leftovers: list[Path] = []      #: earlier unfinished runs' staging folders with content (create())
         self._check_out(overwrite)
         if self.bag_path is not None and self._bag_entry is None:
             self._check_separate_bag(overwrite)
@@ -146,8 +151,10 @@ class RunOutput:
             raise ParameterError(f'--out: {out} exists and is not a folder')
         earlier = [name for name in self._out.entries if (out / name).exists()] if out.is_dir() else []
         if earlier and not overwrite:
-            raise ParameterError(f'--out: {out} holds an earlier run ({", ".join(earlier)}); pass --overwrite to '
-                                 'replace it, or choose another --out')
+            raise ParameterError(f'--out: {out} holds an earlier run ({", ".join(earlier)}); pass '
+                                 '--overwrite to replace it, or choose another --out')
+        if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
+            raise ParameterError(f'--out: cannot write into {out} (permission denied, or a read-only file system)')
         _check_writable_parent('--out', out)
 
     def _check_separate_bag(self, overwrite: bool) -> None:
@@ -186,15 +193,31 @@ class RunOutput:
 
     def create(self) -> None:
         """Lock ``out_dir`` and make the staging folders (raises ParameterError if another run is writing
-        it, or it cannot be written)."""
+        it, or it cannot be written); :attr:`leftovers` lists what earlier unfinished runs left."""
         try:
             self._lock_out()
+            self.leftovers = self._clear_leftovers()
             self._out.create_staging('--out')
             if self._bag is not None:
                 self._bag.create_staging('--bag')
         except ParameterError:
             self.discard()
             raise
+
+    def _clear_leftovers(self) -> list[Path]:
+        """The staging folders of earlier runs of ``out_dir`` that did not finish (with the lock held, no
+        other run is writing it, so their processes are gone): the empty ones are removed, the others (an
+        interrupted flight's bag, say) returned, oldest first."""
+        final = self._out.final
+        found = sorted((folder for folder in final.parent.glob(f'{final.name}{STAGING_MARK}*') if folder.is_dir()),
+                       key=lambda folder: folder.stat().st_mtime)
+        kept = []
+        for folder in found:
+            try:
+                folder.rmdir()
+            except OSError:
+                kept.append(folder)
+        return kept
 
     @property
     def out(self) -> Path:

@@ -7,11 +7,12 @@ gains key and its valid range.
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Mapping, Sequence
 
-from nnit2fsmc_controller.factory import build_controller, control_period, load_gains
+from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, control_period, load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.flight_bag import select_topics
 from quad_msgs_bridge.contract import TopicSpec
@@ -60,9 +61,9 @@ def _vehicle(argument: str, value) -> VehicleParams:
         raise ParameterError(f'{argument}: {error}') from error
 
 
-def _changes(true_vehicle: VehicleParams, events: dict) -> tuple[VehicleChange, ...]:
+def _changes(true_vehicle: VehicleParams, events: dict, duration: float) -> tuple[VehicleChange, ...]:
     """The true vehicle's changes of ``events`` (argument -> {'at_s': t, value key: value}), each applied on
-    top of the earlier ones."""
+    top of the earlier ones; each must happen within the flight's ``duration`` [s]."""
     timed = []
     for argument, event in events.items():
         key, field_name = CHANGE_KEYS[argument]
@@ -80,7 +81,11 @@ def _changes(true_vehicle: VehicleParams, events: dict) -> tuple[VehicleChange, 
                 raise ParameterError(f'{argument}.{key}: expected 4 lost fractions in [0, 1) of F1..F4, '
                                      f'got {value!r}')
             value = tuple(value)
-        timed.append((check_number(f'{argument}.at_s', event['at_s'], 0.0), argument, field_name, value))
+        at_s = check_number(f'{argument}.at_s', event['at_s'], 0.0)
+        if at_s >= duration:
+            raise ParameterError(f'{argument}.at_s: {at_s:g} s is not before the end of the {duration:g} s flight, so '
+                                 f'the change would never happen (valid: 0 <= at_s < {duration:g})')
+        timed.append((at_s, argument, field_name, value))
     changes, vehicle = [], true_vehicle
     for at_s, argument, field_name, value in sorted(timed, key=lambda event: event[0]):
         change = vehicle_change(argument, vehicle, at_s, **{field_name: value})
@@ -114,7 +119,7 @@ def plan_perturbations(scenario: str, controller: str, seed: int, duration: floa
     true = nominal if true_vehicle is None else _vehicle('true_vehicle', true_vehicle)
     events = {key: value for key, value in (('mass_change', mass_change),
                                             ('rotor_efficiency_loss', rotor_efficiency_loss)) if value is not None}
-    changes = _changes(true, events)
+    changes = _changes(true, events, duration)
     if true_vehicle is None and not changes and not (spec.has_wind or spec.sensor_noise or spec.delay_s
                                                      or spec.motor_time_constant_s):
         return None
@@ -149,7 +154,8 @@ def check_settle_time(settle_time: float | None, duration: float, control_rate: 
 
 def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
                 disturbances: bool | None = None, seed: int = 0, vehicle_file: Path | VehicleParams | None = None,
-                gains_file: Path | None = None, physics_rate: float = 1000.0, settle_time: float | None = None,
+                gains_file: Path | Mapping | None = None, physics_rate: float = 1000.0,
+                settle_time: float | None = None,
                 max_error: float = 1.0, topics: Sequence[str] | None = None, **world) -> FlightPlan:
     """Every setting of a flight, checked; raises ParameterError (see the module doc).
 
@@ -173,17 +179,24 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
         raise ParameterError(f'vehicle: expected a VehicleParams or a vehicle YAML path, got {vehicle_file!r}')
     if disturbances is not None:
         vehicle_disturbances = vehicle_disturbances.switched(disturbances)
-    if gains_file is not None and not isinstance(gains_file, (str, Path)):
-        raise ParameterError(f'gains: expected a gains YAML path, got {gains_file!r}')
-    try:
-        gains = load_gains(gains_file)
-    except ParameterError as error:
-        raise ParameterError(f'gains: {error}') from error
+    if controller not in CONTROLLERS:
+        raise ParameterError(f'controller: {controller!r} is not one of {", ".join(CONTROLLERS)}')
+    if isinstance(gains_file, Mapping):
+        gains = copy.deepcopy(dict(gains_file))    # as make_controller takes it: a whole gains tree
+    elif gains_file is None or isinstance(gains_file, (str, Path)):
+        try:
+            gains = load_gains(gains_file)
+        except ParameterError as error:
+            raise ParameterError(f'gains: {error}') from error
+    else:
+        raise ParameterError(f'gains: expected a gains mapping or a gains YAML path, got {gains_file!r}')
     gains.setdefault('nnit2fsmc', {})['seed'] = seed
+    source = ('the given mapping' if isinstance(gains_file, Mapping) else gains_file
+              or 'the packaged controller.yaml')
     try:
         build_controller(controller, params, gains)
     except ParameterError as error:
-        raise ParameterError(f'gains ({gains_file or "the packaged controller.yaml"}): {error}') from error
+        raise ParameterError(f'gains ({source}): {error}') from error
     control_rate = 1.0 / control_period(gains)
     trajectory = make_scenario(scenario, duration)
     duration = trajectory.duration if duration is None else duration

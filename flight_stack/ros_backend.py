@@ -30,7 +30,7 @@ from typing import Sequence
 import yaml
 
 from nnit2fsmc_controller.trajectory import make_scenario
-from quad_msgs_bridge.bag.flight_bag import disturbances_label, ros_flight_custom_data
+from quad_msgs_bridge.bag.flight_bag import DURATION_KEY, MAX_ERROR_KEY, disturbances_label, ros_flight_custom_data
 from quad_msgs_bridge.bag.merge import merge_parts
 from quad_msgs_bridge.contract import RECORDED_TOPICS, vehicle_namespaces
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
@@ -68,6 +68,7 @@ class RosFlightConfig:
     #: see quad_msgs_bridge.bag.publication_log) or 'recorder' (the record node, one more reader of every topic)
     record_by: str = 'publishers'
     publish_tf: bool = True   #: the simulator broadcasts every vehicle's odom -> <ns>/base_link on /tf
+    max_error: float | None = None   #: [m] the run's --max-error, noted in the bag for its review
 
 
 @dataclass
@@ -185,7 +186,9 @@ def merge_publication_logs(config: RosFlightConfig, parts: Path, home: str, name
     known = {topic.name: topic for topic in RECORDED_TOPICS}
     custom = ros_flight_custom_data(params, config.settle_time, config.seed, namespaces,
                                     controller=config.controller, scenario=config.scenario,
-                                    disturbances=disturbances_label(config.disturbances))
+                                    disturbances=disturbances_label(config.disturbances),
+                                    **{DURATION_KEY: repr(float(config.duration)),
+                                       MAX_ERROR_KEY: '' if config.max_error is None else repr(config.max_error)})
     result = merge_parts(parts, config.bag, [known[name] for name in config.topics], namespaces, custom,
                          overwrite=True)
     for part, reason in result.cut.items():

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from quad_msgs_bridge.review.metrics import FlightRecord, flight_metrics, has_fuzzy_term
 from quad_msgs_bridge.review.report import describe_share
+from quad_msgs_bridge.review.verdict import failures as flight_failures
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
@@ -14,7 +15,7 @@ from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str, scenario: str, seed: int,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
                   physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None,
-                  failure_time_s: float | None = None) -> dict:
+                  failure_time_s: float | None = None, planned_duration_s: float | None = None) -> dict:
     """Metrics of the flight (its metrics dict, e.g. ``Flight.metrics()``, or a FlightRecord to compute them
     from) plus everything needed to reproduce it.
 
@@ -23,7 +24,8 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
     the bag give it; without it, the time of the last step: of the record, or the metrics' duration), a state or force went
     non-finite or the largest position error after the settling window exceeds ``max_error`` [m];
     ``failures`` says which, ``failure`` and ``failure_time_s`` why and when it ended early (None if
-    it did not).
+    it did not), ``ended_early`` the two in words; ``planned_duration_s`` [s] the length flown for
+    (None: not given), as the review gives them (quad_msgs_bridge.review.verdict).
     """
     metrics = flight if isinstance(flight, dict) else flight_metrics(
         flight, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
@@ -31,17 +33,16 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
     sim_time = metrics['duration_s']
     if failure is not None and failure_time_s is None:
         failure_time_s = float(metrics['duration_s'] if isinstance(flight, dict) else flight.time[-1])
-    failures = [] if failure is None else [f'the flight ended early: {failure} at {failure_time_s:.3f} s']
-    if not metrics['all_finite']:
-        failures.append('non-finite state or rotor force')
-    if metrics['max_position_error_m'] > max_error:
-        failures.append(f'max position error {metrics["max_position_error_m"]:.3f} m exceeds --max-error {max_error:g} m')
+    ended = None if failure is None else f'{failure} at {failure_time_s:.3f} s'
+    failures = flight_failures(metrics, ended, max_error)
     return {
         **metrics,
         'flight_ok': not failures,
         'failures': failures,
         'failure': failure,
         'failure_time_s': failure_time_s,
+        'ended_early': ended,
+        'planned_duration_s': planned_duration_s,
         'backend': backend,
         'controller': controller,
         'scenario': scenario,

@@ -188,7 +188,8 @@ def test_replay_reviews_a_flight_that_failed_before_settling(tmp_path):
     assert math.isnan(json.loads((target / 'review.json').read_text())[0]['rmse_position_m'])
     assert (target / 'bag' / 'metadata.yaml').exists() and (target / 'report.html').exists()
     report = (target / 'report.md').read_text()    # why and when it failed, and what was flown, from its bag
-    assert 'result: FAILED: position error above max_error at ' in report and 'not recorded' not in report
+    assert 'result: FAILED: the flight ended early: position error above max_error at ' in report
+    assert 'not recorded' not in report
     assert 'NN seed: 0' in report and f'campaign seed: {spec.seed}' in report and 'campaign flight: 0' in report
 
 

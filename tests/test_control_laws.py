@@ -290,7 +290,7 @@ def test_se3_is_lee_leok_mcclamroch_away_from_equilibrium():
     assert abs(reference.rates).min() > 0.1    # the desired-rate feed-forward was exercised
 
 
-@pytest.mark.parametrize('height, limit_key', [(1.5, 'max_tilt'), (0.0, 'low_altitude_max_tilt')])
+@pytest.mark.parametrize('height, limit_key', [(1.5, 'max_tilt'), (0.1, 'low_altitude_max_tilt')])   # above take-off
 def test_se3_tilt_limit_keeps_the_direction_of_the_horizontal_force(height, limit_key):
     controller = build_controller('se3', VEHICLE, GAINS)
     far = ReferenceSample((4.0, -3.0, height), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
@@ -307,9 +307,14 @@ def test_se3_tilt_limit_keeps_the_direction_of_the_horizontal_force(height, limi
 #: the kind flies today (5.8, 23.5, 0.15, 0.12, 0.44 mm; every kind through the measurement stage, the
 #: baselines matched at the fuzzy slope at S = 0): a broken law (a lost term, a sign) misses them. The
 #: NNIT2FSMC and its -sat, -type1 ablations fly 7.2, 6.2, 6.2 mm since issue 21's x, y network (1.9 mm
-#: before), which learns the section IV bias more slowly in the first seconds (docs/PAPER.md 4.8.8): bounds 1.5x
-FLIGHT_RMSE_BOUND = {'nnit2fsmc': 0.011, 'smc-sign': 0.018, 'smc-sat': 0.07, 'smc-integral': 5e-4,
-                     'pid': 4e-4, 'se3': 1.3e-3, 'nnit2fsmc-sat': 0.0095, 'nnit2fsmc-type1': 0.0095,
+#: before), which learns the section IV bias more slowly in the first seconds (docs/PAPER.md 4.8.8): bounds 1.5x.
+#: Since issue 26 every kind lifts off level (common.takeoff_height, before: the NNIT2FSMC kinds alone): the
+#: baselines start tracking 0.5 s later and 5 cm behind, which in this short window costs smc-sign and smc-sat
+#: their slow reaching phase (147, 138 mm; they catch up by about 15 s) and smc-integral, pid, se3 a little
+#: (1.6, 0.68, 0.81 mm); l1-se3 and indi fly 0.66 and 0.44 mm
+FLIGHT_RMSE_BOUND = {'nnit2fsmc': 0.011, 'smc-sign': 0.45, 'smc-sat': 0.42, 'smc-integral': 5e-3,
+                     'pid': 2e-3, 'se3': 2.4e-3, 'l1-se3': 2e-3, 'indi': 1.3e-3,
+                     'nnit2fsmc-sat': 0.0095, 'nnit2fsmc-type1': 0.0095,
                      'nnit2fsmc-nolearn': 0.6, 'nnit2fsmc-bias': 0.009}   # about 3x what each flies (8 s helix)
 FLIGHT = 8.0
 
@@ -338,7 +343,7 @@ def moderate_inputs(rng, count):
 
 
 @pytest.mark.parametrize('allocation', ['priority', 'clip'])
-@pytest.mark.parametrize('kind', ['pid', 'smc-integral', 'se3'])
+@pytest.mark.parametrize('kind', ['pid', 'smc-integral', 'se3', 'l1-se3', 'indi'])
 def test_a_batch_is_three_single_vehicles(kind, allocation):
     gains = copy.deepcopy(GAINS)
     gains['common']['allocation'] = allocation
@@ -374,7 +379,7 @@ def test_allocation_changes_in_flight_and_the_integrals_are_kept():
     assert retuned.allocation == 'clip'
     assert [law.integral for law in retuned.laws.values()] == [law.integral for law in running.laws.values()]
     out = retuned.update(0.03, STATE, REFERENCE)
-    np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, VEHICLE.yaw_coefficient), atol=1e-15)
+    np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, VEHICLE.mixer), atol=1e-15)
 
 
 def test_every_text_gain_has_its_valid_values_for_the_ros_node():

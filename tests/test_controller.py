@@ -72,7 +72,7 @@ def test_eq10_tilt_limit_keeps_the_direction(psi, height, tilt):
 @pytest.mark.parametrize('height, tilt', [(1.0, 0.8), (0.1, 0.6)])
 def test_every_controller_asks_for_the_tilt_limit_of_its_height(kind, height, tilt):
     """50 m off in x and y: the controller asks for the largest tilt, the limit at the vehicle's height (above the
-    NNIT2FSMC's take-off height of 0.05 m, so its x, y laws act). (The paper-style SMCs' switching gain,
+    take-off height of 0.05 m every kind shares, so the x, y laws act). (The paper-style SMCs' switching gain,
     0.3 m/s^2, never reaches the limit.)"""
     far = ReferenceSample((50.0, 50.0, height), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)
     out = build_controller(kind, PARAMS, GAINS).update(0.0, [0.0, 0.0, height] + [0.0] * 9, far)
@@ -187,7 +187,7 @@ def test_every_kind_builds_and_keeps_rotor_forces_within_limits(kind):
         out = controller.update(k * controller.dt, state, reference)
         assert set(out.axes) == set(AXES)     # per-subsystem diagnostics for the recording and the review
         assert all(PARAMS.F_min <= f <= PARAMS.F_max for f in out.forces)
-        np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, PARAMS.yaw_coefficient),
+        np.testing.assert_allclose(out.controls, controls_from_forces(*out.forces, PARAMS.mixer),
                                    atol=1e-15)
         assert all(math.isfinite(a.value) for a in out.axes.values())
 

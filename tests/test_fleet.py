@@ -56,7 +56,7 @@ def test_the_fleet_fails_when_one_vehicle_fails_and_the_table_names_it():
 
 
 @pytest.mark.parametrize('arguments, message', [
-    (['--vehicles', '0'], '--vehicles: 0.0 is outside the valid range [1, 20]'),
+    (['--vehicles', '0'], '--vehicles: 0 is outside the valid range 1 to 20 (a whole number)'),
     (['--vehicles', '2', '--backend', 'embedded', '--live'], '--live: the live view shows one vehicle'),
 ])
 def test_run_stack_refuses_a_bad_fleet_before_flying(arguments, message, tmp_path):

@@ -71,12 +71,14 @@ def test_to_pandas_says_how_to_get_pandas_when_it_is_missing(flown_with_bag, mon
         flown.to_pandas()
 
 
-def test_to_pandas_gives_one_column_per_series(flown_with_bag):
+def test_to_pandas_gives_one_column_per_series_indexed_by_time(flown_with_bag):
     pytest.importorskip('pandas', reason='pandas is not installed (requirements-test.txt pins it)')
     flown, _ = flown_with_bag
     frame = flown.to_pandas()
-    assert frame.shape == (3000, 43) and list(frame.columns) == list(flown.columns())
+    assert frame.shape == (3000, 42) and list(frame.columns) == list(flown.columns())[1:]
+    assert frame.index.name == 'time_s' and np.array_equal(frame.index.to_numpy(), flown.time)
     assert np.array_equal(frame['U4'].to_numpy(), flown.controls[:, 3])
+    assert frame.loc[1.5, 'z'] == flown.state[1500, 2]      # a row by its sim time [s]
 
 
 def synthetic_steps(count: int):

@@ -81,7 +81,7 @@ def test_hover_forces_drift_under_the_section_iv_disturbances():
     """With the disturbances on, the same forces no longer hold: A/m acts on the translation."""
     state = [0.0, 0.0, 1.5] + [0.0] * 9
     derivative = QuadrotorModel(PARAMS, DISTURBANCES).derivative(
-        0.0, state, controls_from_forces(*(PARAMS.hover_force,) * 4, PARAMS.yaw_coefficient))
+        0.0, state, controls_from_forces(*(PARAMS.hover_force,) * 4, PARAMS.mixer))
     np.testing.assert_allclose(derivative[VX:VZ + 1], [0.126 / PARAMS.m] * 3, rtol=1e-12)
 
 

@@ -14,7 +14,8 @@ NOMINAL, DISTURBANCES = load_vehicle_file()
 CALM = DISTURBANCES.switched(False)
 DT = 1e-3
 HOVERING = [0.0, 0.0, 3.0] + [0.0] * 9
-# Rotor layout of mixer.py (body FLU): F1 front, F2 right, F3 back, F4 left; F2 and F4 turn clockwise.
+# Rotor layout of the paper's plus frame (rotor_layout.py, body FLU): F1 front, F2 right, F3 back, F4 left; F2 and F4
+# turn clockwise.
 ROTOR_POSITIONS = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]) * NOMINAL.d
 REACTION_SIGN = np.array([-1.0, 1.0, -1.0, 1.0])
 

@@ -20,7 +20,7 @@ def hold_altitude(state):
     u2 = -(1.0 * phi + 0.1 * dphi) / NOMINAL.d
     u3 = -(1.0 * theta + 0.1 * dtheta) / NOMINAL.d
     u4 = -0.02 * psi - 0.005 * dpsi
-    return forces_from_controls(u1, u2, u3, u4, NOMINAL.yaw_coefficient)
+    return forces_from_controls(u1, u2, u3, u4, NOMINAL.mixer)
 
 
 START = (0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.05, -0.03, 0.2, 0.0, 0.0, 0.0)

@@ -129,7 +129,7 @@ def test_a_duration_off_by_round_off_ends_the_path_once():
     ([], [], 'as many times as points'),
     ([1.0, 1.0], [hold((0, 0, 1)), hold((0, 0, 2))], 'increase strictly'),
     ([2.0, 1.0], [hold((0, 0, 1)), hold((0, 0, 2))], 'increase strictly'),
-    ([0.0], [hold((0, math.nan, 1))], 'non-finite'),
+    ([0.0], [ReferenceSample((0, math.nan, 1), (0, 0, 0), (0, 0, 0), 0.0)], 'non-finite'),   # hold() refuses it
     ([0.0], [ReferenceSample((0, 0, 1), (0, 0, 0), (0, 0, 0), math.inf)], 'non-finite'),
 ])
 def test_invalid_paths_are_refused(times, points, fragment):

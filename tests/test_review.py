@@ -251,9 +251,9 @@ def test_a_flight_that_failed_before_settling_is_recorded_as_failed_and_reviewed
         assert custom['failure'] == result.failure and float(custom['failure_time_s']) == result.failure_time_s
     assert review_main([str(bag), '--out', str(tmp_path / 'review'), '--no-plots']) == 0
     out = capsys.readouterr().out
-    assert f'FAILED: position error above max_error at {when} s' in out
+    assert f'FAILED: the flight ended early: position error above max_error at {when} s' in out
     report = (tmp_path / 'review' / 'report.md').read_text()
-    assert f'result: FAILED: position error above max_error at {when} s' in report
+    assert f'result: FAILED: the flight ended early: position error above max_error at {when} s' in report
     [saved] = json.loads((tmp_path / 'review' / 'review.json').read_text())
     assert saved['failure'] == result.failure and saved['rmse_position_m'] != saved['rmse_position_m']   # NaN
 

@@ -79,25 +79,25 @@ def test_a_failed_flights_report_says_why_and_when_and_what_was_flown(tmp_path):
     failed = flight(1.472, failure='flipped over', failure_time_s='1.472')
     review = review_flights([failed], tmp_path, plots=False)
     report = (tmp_path / 'report.md').read_text()
-    assert 'result: FAILED: flipped over at 1.472 s' in report
-    assert '| result | FAILED: flipped over at 1.472 s |' in report
-    assert 'nnit2fsmc FAILED: flipped over at 1.472 s; its metrics: NaN: it failed before the settling window ended' \
-        in report
+    assert 'result: FAILED: the flight ended early: flipped over at 1.472 s' in report
+    assert '| result | FAILED: the flight ended early: flipped over at 1.472 s |' in report
+    assert ('nnit2fsmc FAILED: the flight ended early: flipped over at 1.472 s; its metrics: NaN: it failed before '
+            'the settling window ended') in report
     assert 'disturbances (paper section IV): enabled' in report and 'NN seed: 7' in report
     assert 'not recorded' not in report
-    assert 'FAILED: flipped over at 1.472 s' in (tmp_path / 'report.html').read_text()
+    assert 'FAILED: the flight ended early: flipped over at 1.472 s' in (tmp_path / 'report.html').read_text()
     [saved] = json.loads((tmp_path / 'review.json').read_text())
     assert saved['failure'] == 'flipped over' and saved['failure_time_s'] == 1.472
     assert math.isnan(review.metrics[0]['rmse_position_m'])
-    assert 'FAILED: flipped over at 1.472 s' in text_table(['nnit2fsmc'], review.metrics)
+    assert 'FAILED: the flight ended early: flipped over at 1.472 s' in text_table(['nnit2fsmc'], review.metrics)
 
 
 def test_a_finished_flights_report_gives_the_fuzzy_share_rise_and_every_window(tmp_path):
-    review_flights([flight(60.0)], tmp_path, plots=False)
+    review_flights([flight(60.0, duration_s='60.0')], tmp_path, plots=False)
     report = (tmp_path / 'report.md').read_text()
     [phi] = [line for line in report.splitlines() if line.startswith('| fuzzy share phi')]
     assert 'rises 0.05 (5-10 s) -> 0.67 (35-40 s)' in phi and 'last 0.05 at 55-60 s' in phi
-    assert '| result | flew its whole duration |' in report
+    assert '| result | OK: flew its whole duration (60 s) |' in report
     assert '## Fuzzy share per window' in report
     assert '| 35 - 40 | 0.048 | 0.048 | 0.048 | 0.667 | 0.048 | 0.048 |' in report
     assert '| 0 - 5 (settling) |' in report

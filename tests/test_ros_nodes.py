@@ -96,7 +96,8 @@ def payloads(bag, namespace):
     return topics
 
 
-def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
+@pytest.mark.parametrize('controller', ['nnit2fsmc', 'l1-se3', 'indi'])   # and the adaptive baselines (issue 26)
+def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path, controller):
     """Same odometry sequence, same bag payloads byte for byte, same summary metrics (issues 3 and 4)."""
     from flight_stack.embedded import fly_embedded
     from flight_stack.ros_backend import RosFlightConfig, fly_ros
@@ -109,13 +110,13 @@ def test_lockstep_ros_flight_equals_the_embedded_flight(tmp_path):
     duration, settle = 7.0, 5.0
     trajectory = make_scenario('paper', duration)
     result = fly_ros(RosFlightConfig(
-        vehicles=[FleetVehicle('equal')], controller='nnit2fsmc', scenario='paper', duration=duration,
+        vehicles=[FleetVehicle('equal')], controller=controller, scenario='paper', duration=duration,
         disturbances=True, seed=0, physics_rate=1000.0, control_rate=1000.0, bag=tmp_path / 'ros',
         topics=[t.name for t in RECORDED_TOPICS], settle_time=settle, quiet=True))
     assert result.failed_node is None, result
     params, disturbances = load_vehicle_file()
     with FlightBag.create(tmp_path / 'embedded', params, settle, namespace='equal') as bag:
-        embedded = fly_embedded('nnit2fsmc', trajectory, params, disturbances, load_gains(), duration, 1000.0,
+        embedded = fly_embedded(controller, trajectory, params, disturbances, load_gains(), duration, 1000.0,
                                 bag=bag)
 
     ros_flight = read_flight(tmp_path / 'ros')

@@ -6,6 +6,7 @@ import os
 import shutil
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import pytest
@@ -73,7 +74,7 @@ def gains_file(tmp_path: Path, old: str, new: str) -> str:
 BAD_SETTINGS = {   # the settings of issue 10 (and a few more) -> what the error must name
     'control_rate 0': (lambda tmp: ['--gains', gains_file(tmp, 'control_rate: 1000.0', 'control_rate: 0')],
                        'common.control_rate: 0.0 is outside the valid range (0.0, inf)'),
-    'negative learning_rate': (lambda tmp: ['--gains', gains_file(tmp, 'learning_rate: 0.9}', 'learning_rate: -0.9}')],
+    'negative learning_rate': (lambda tmp: ['--gains', gains_file(tmp, 'learning_rate: 0.9,', 'learning_rate: -0.9,')],
                                'nnit2fsmc.axes.x.learning_rate: -0.9 is outside the valid range [0.0, inf)'),
     'type_reducer kmx': (lambda tmp: ['--gains', gains_file(tmp, 'type_reducer: km ', 'type_reducer: kmx ')],
                          "type_reducer: 'kmx' is not one of km, nie-tan"),
@@ -177,6 +178,7 @@ def fake_ros_flight(failed_node):
 def test_the_ros_backend_gets_the_same_guarantees(earlier_run, monkeypatch, capsys, no_plots):
     out, before = earlier_run
     options = ['--backend', 'ros', '--quiet', '--duration', '1.5', '--out', str(out), '--overwrite']
+    monkeypatch.setitem(sys.modules, 'rclpy', types.ModuleType('rclpy'))   # as where ROS is installed
     monkeypatch.setattr(ros_backend, 'fly_ros', fake_ros_flight('controller'))
     assert run_stack.main(options) == 1
     err = capsys.readouterr().err

@@ -16,6 +16,7 @@ from flight_stack.embedded import Perturbations, fly_embedded
 from nnit2fsmc_controller.factory import (ABLATIONS, CONTROLLERS, PAPER_FAITHFUL, build_controller,
                                           build_measurement_stage, flatten_gains, load_gains, unflatten_gains)
 from nnit2fsmc_controller.estimation import VelocityFilter
+from nnit2fsmc_controller.gain_units import in_vehicle_units
 from nnit2fsmc_controller.it2_fuzzy import CENTRES, CONSEQUENTS, LABELS, RULES
 from nnit2fsmc_controller.neural_network import EquivalentControlNetwork
 from nnit2fsmc_controller.trajectory import Helix, Lemniscate, Waypoints, make_scenario
@@ -32,6 +33,14 @@ SURFACES = np.linspace(-3.0, 3.0, 1201)   # beyond every subsystem's fuzzy unive
 
 def law(kind, axis='x', gains=None):
     return build_controller(kind, PARAMS, gains).laws[axis]
+
+
+def on_vehicle(axis, name, gains=None):
+    """The gain ``nnit2fsmc.axes.<axis>.<name>`` of ``gains`` (default the packaged ones) in the law's units on
+    PARAMS (the gains file states it per unit of mass and inertia: nnit2fsmc_controller.gain_units)."""
+    gains = load_gains() if gains is None else gains
+    full = f'nnit2fsmc.axes.{axis}.{name}'
+    return in_vehicle_units(full, gains['nnit2fsmc']['axes'][axis][name], PARAMS, axis)
 
 
 def type1_output(s, scale, gain):
@@ -57,7 +66,7 @@ def test_ablation_kinds_are_controllers():
 def test_sat_ablation_is_minus_k_sat_of_s_over_phi(axis):
     gains = load_gains()['nnit2fsmc']['axes'][axis]
     fuzzy = law('nnit2fsmc-sat', axis).fuzzy
-    expected = -gains['fuzzy_gain'] * np.clip(SURFACES / gains['input_scale'], -1.0, 1.0)
+    expected = -on_vehicle(axis, 'fuzzy_gain') * np.clip(SURFACES / gains['input_scale'], -1.0, 1.0)
     np.testing.assert_array_equal(fuzzy(SURFACES), expected)
     assert [fuzzy(float(s)) for s in SURFACES[::50]] == list(expected[::50])
 
@@ -66,7 +75,7 @@ def test_sat_ablation_is_minus_k_sat_of_s_over_phi(axis):
 def test_type1_ablation_is_the_it2_system_with_equal_upper_and_lower_mfs(axis):
     gains = load_gains()['nnit2fsmc']['axes'][axis]
     fuzzy = law('nnit2fsmc-type1', axis).fuzzy
-    expected = [type1_output(s, gains['input_scale'], gains['fuzzy_gain']) for s in SURFACES]
+    expected = [type1_output(s, gains['input_scale'], on_vehicle(axis, 'fuzzy_gain')) for s in SURFACES]
     np.testing.assert_allclose(fuzzy(SURFACES), expected, rtol=0, atol=1e-12)
     lower, upper = fuzzy.type_reduced(SURFACES)
     np.testing.assert_allclose(lower, upper, rtol=0, atol=1e-12)   # no footprint of uncertainty left
@@ -133,7 +142,7 @@ def weights(network):
 def test_below_the_takeoff_height_only_the_z_network_learns(batch):
     """takeoff_height: on the ground the x, y and attitude networks hold and the desired tilt is 0; z learns
     (it lifts the vehicle)."""
-    gains = unflatten_gains({**flatten_gains(load_gains()), 'nnit2fsmc.takeoff_height': 0.05})
+    gains = unflatten_gains({**flatten_gains(load_gains()), 'common.takeoff_height': 0.05})
     controller = build_controller('nnit2fsmc', PARAMS, gains, batch=batch)
     start = {axis: weights(law.network).copy() for axis, law in controller.laws.items()}
     reference = Helix().sample(0.5)           # 0.5 s into the helix (its height: 5 cm)
@@ -186,14 +195,14 @@ def test_velocity_filter_is_a_first_order_low_pass_of_the_velocities_only():
 
 def test_learning_rate_per_second_gives_the_same_rate_per_second_at_any_control_rate():
     gains = load_gains()
-    alpha = gains['nnit2fsmc']['axes']['phi']['learning_rate']
+    alpha = on_vehicle('phi', 'learning_rate')
     for rate in (1000.0, 250.0, 100.0):
         tree = {**gains, 'common': {**gains['common'], 'control_rate': rate}}
         assert law('nnit2fsmc', 'phi', tree).network.learning_rate == pytest.approx(alpha / rate, rel=1e-12)
     faithful = flatten_gains(gains)
     faithful.update(PAPER_FAITHFUL)
     assert law('nnit2fsmc', 'phi', unflatten_gains(faithful)).network.learning_rate == \
-        PAPER_FAITHFUL['nnit2fsmc.axes.phi.learning_rate']
+        on_vehicle('phi', 'learning_rate', unflatten_gains(faithful))
     # the paper-faithful per-update rates are the per-second defaults at the default 1 kHz (but z's,
     # slowed from 2 to 0.5 per second for motor lag: docs/PAPER.md section 3; and x's, y's, 10 -> 0.9 per
     # second with their network's output cap 1.5 -> 5 m/s^2: docs/PAPER.md 4.8.8)

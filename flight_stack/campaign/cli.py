@@ -7,7 +7,8 @@ from pathlib import Path
 
 from .runner import MAX_BATCH_SIZE
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.output_path import output_path
+from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 DESCRIPTION = """Fly a robustness campaign: every controller of the spec flies the same perturbed flights
 (true vehicle vs nominal model, wind, sensor noise, delay, motor lag), as numpy batches on local
@@ -30,7 +31,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('spec', type=Path, nargs='?',
                         help='campaign spec (YAML): a file, or the name of a shipped spec (see --list)')
     parser.add_argument('--list', action='store_true', help='list the shipped specs (where they are) and exit')
-    parser.add_argument('--out', type=Path, default=None, help='output folder (default out/campaign-<spec name>)')
+    parser.add_argument('--out', type=output_path, default=None,
+                        help='output folder (default out/campaign-<spec name>)')
     parser.add_argument('--flights', type=int, default=None,
                         help='flights per controller, >= 1, no upper limit (overrides the spec)')
     parser.add_argument('--seed', type=int, default=None, help='campaign seed (overrides the spec)')
@@ -46,9 +48,14 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='fly flight K alone on the ordinary embedded path, with its bag and review, '
                              'into DIR/replay-K/<controller>/')
     parser.add_argument('--resume', action='store_true', help='fly only the flights DIR/flights.csv lacks')
-    parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle YAML (default: the packaged one)')
+    parser.add_argument('--vehicle', type=Path, default=None,
+                        help='nominal vehicle YAML, or a shipped vehicle by name: paper (the default), crazyflie, '
+                             'hummingbird, x500')
     parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
+    parser.add_argument('--fail-below', type=float, default=None, metavar='FRACTION',
+                        help='exit with status 1, naming them, when any controller finishes fewer than FRACTION '
+                             '(0 to 1) of its flights (default: exit 0 whatever the success rates; a CI gate)')
     args = parser.parse_args(argv)
     if args.spec is None and not args.list:
         parser.error('the spec is required (a YAML file, or a shipped spec: --list)')
@@ -57,13 +64,15 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
 
 def main(argv: list[str]) -> int:
     args = parse_args(argv)
-    from .runner import RunOptions, run_campaign
+    from .runner import RunOptions, check_output, run_campaign
     from .spec import load_spec, shipped_specs
     if args.list:
         for path in shipped_specs():
             print(f'{path.stem:28s} {path}')
         return 0
     try:
+        if args.fail_below is not None:
+            check_number('--fail-below', args.fail_below, 0.0, 1.0)
         spec = load_spec(args.spec).overridden(flights=args.flights, seed=args.seed, duration=args.duration,
                                                controllers=args.controllers)
         out_dir = args.out or Path('out') / f'campaign-{args.spec.stem}'
@@ -75,6 +84,7 @@ def main(argv: list[str]) -> int:
         if args.replay is not None:
             from .replay import replay_flight
             return replay_flight(spec, out_dir, args.replay, options)
+        check_output(spec, out_dir, args.resume)
         print(f'campaign: {len(spec.controllers)} controller(s) x {spec.flights} flights of "{spec.scenario}", '
               f'{spec.duration:g} s each, seed {spec.seed} -> {out_dir}', file=sys.stderr)
         outcome = run_campaign(spec, out_dir, options)
@@ -94,7 +104,19 @@ def main(argv: list[str]) -> int:
     print(format_table(outcome.summary_path))
     print(f'results: {outcome.summary_path}, {outcome.summary_path.parent / "flights.csv"}, '
           f'{outcome.summary_path.parent / "report.html"}')
-    return 0
+    return 0 if args.fail_below is None else gate(outcome.summary_path, args.fail_below)
+
+
+def gate(summary_path: Path, fraction: float) -> int:
+    """--fail-below: 1 after naming every controller that finished fewer than ``fraction`` of its flights,
+    else 0."""
+    import json
+    below = [(name, entry) for name, entry in json.loads(summary_path.read_text())['controllers'].items()
+             if entry['flights'] and entry['finished'] < fraction * entry['flights']]
+    for name, entry in below:
+        print(f'FAILED: {name} finished {entry["finished"]} of {entry["flights"]} flights, below --fail-below '
+              f'{fraction:g}', file=sys.stderr)
+    return 1 if below else 0
 
 
 def format_table(summary_path: Path) -> str:

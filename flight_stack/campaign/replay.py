@@ -47,7 +47,7 @@ def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOp
         with FlightBag.create(target / 'bag', setup.nominal, spec.settle_time, topics=topics, overwrite=True,
                               controller=controller, scenario=spec.scenario, backend='embedded', seed=nn_seed,
                               disturbances=disturbances_label(setup.disturbances.enabled),
-                              campaign_seed=spec.seed, flight=flight) as bag:
+                              campaign_seed=spec.seed, flight=flight, duration_s=repr(float(spec.duration))) as bag:
             result = fly_embedded(controller, setup.trajectory, setup.nominal, setup.disturbances, setup.gains,
                                   spec.duration, 1.0 / setup.physics_dt, progress=options.progress, bag=bag,
                                   perturbations=perturbations, rules=setup.rules(spec))
@@ -56,7 +56,7 @@ def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOp
                                 disturbances=setup.disturbances, gains=setup.gains,
                                 physics_rate=1.0 / setup.physics_dt, wall_time_s=result.wall_time_s,
                                 max_error=spec.max_error_m, failure=result.failure,
-                                failure_time_s=result.failure_time_s)
+                                failure_time_s=result.failure_time_s, planned_duration_s=spec.duration)
         summary['campaign'] = {'seed': spec.seed, 'flight': flight, 'sampled': conditions.sampled_values(setup.nominal)}
         write_summary(summary, target)
         # reviewed from the record in memory (what the bag holds), as a single flight is: it knows whether

@@ -101,7 +101,8 @@ def flights_to_fly(spec: CampaignSpec, done: set) -> int:
 
 def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
     """ParameterError if ``out_dir`` cannot take this campaign (touches nothing): it is a file, or it holds a
-    campaign and ``resume`` is off, or it holds another spec's campaign."""
+    campaign and ``resume`` is off, or it holds another spec's campaign, or ``resume`` is on and it holds
+    no campaign (a mistyped path would otherwise start afresh)."""
     if out_dir.exists() and not out_dir.is_dir():
         raise ParameterError(f'--out: {out_dir} exists and is not a folder; choose another --out')
     base = out_dir
@@ -110,6 +111,9 @@ def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
     if not base.is_dir():
         raise ParameterError(f'--out: {base} is not a folder, so {out_dir} cannot be created')
     flights_path, spec_path = out_dir / FLIGHTS_FILE, out_dir / SPEC_FILE
+    if resume and not (flights_path.exists() or spec_path.exists()):
+        raise ParameterError(f'--resume: {out_dir} holds no campaign to resume (no {FLIGHTS_FILE}); check the path, '
+                             'or leave out --resume to start the campaign there')
     if flights_path.exists() or spec_path.exists():
         if not resume:
             raise ParameterError(f'--out: {out_dir} already holds a campaign; pass --resume (resume=True from '

@@ -55,10 +55,10 @@ def nnit2fsmc_step(hidden_weights, output_weights, hidden_anchor, output_anchor,
     ``network`` is EquivalentControlNetwork.kernel_constants, ``fuzzy`` the corrector's kernel_parameters.
     Returns (v, S, U_eq_hat, U_fuzzy, the fuzzy term to learn from next, U_out): the network learns
     only while |S| is inside the fuzzy universe and ``learning`` holds (NNIT2FSMCLaw)."""
-    learning_rate, output_gain, leakage, e_modification, limit = network
+    learning_rate, output_gain, leakage, e_modification, limit, max_rate = network
     if pending:
         learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, previous_inputs, hidden,
-                      previous_output, teaching, learning_rate, output_gain, leakage, e_modification, limit)
+                      previous_output, teaching, learning_rate, output_gain, leakage, e_modification, limit, max_rate)
     surface = de + lam * e
     corrective = corrective_term(fuzzy, surface)
     output = forward_pass(hidden_weights, output_weights, inputs, hidden)
@@ -223,6 +223,7 @@ class IntegralSlidingModeLaw:
         self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.integral = 0.0
+        self.learning = True   #: False (or per vehicle): the integral holds (take-off hold, CascadedController)
 
     def adapt(self) -> None:
         """Nothing to learn (the integral is part of the update)."""
@@ -230,7 +231,7 @@ class IntegralSlidingModeLaw:
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         xp = namespace_for(e)
         limit = self.integral_limit
-        integral = xp.clip(self.integral + e * self.dt, -limit, limit)
+        integral = xp.where(self.learning, xp.clip(self.integral + e * self.dt, -limit, limit), self.integral)
         surface = de + self.lam * e + self.mu * integral
         equivalent = ref_acc - self.lam * de - self.mu * e - drift
         bound = self.switching_gain + self.gain_uncertainty * xp.abs(equivalent)
@@ -253,13 +254,15 @@ class PIDLaw:
         self.integral_limit = check_number('integral_limit', integral_limit, 0.0)
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)
         self.integral = 0.0
+        self.learning = True   #: False (or per vehicle): the integral holds (take-off hold, CascadedController)
 
     def adapt(self) -> None:
         """Nothing to learn (the integral is part of the update)."""
 
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         limit = self.integral_limit
-        self.integral = namespace_for(e).clip(self.integral + e * self.dt, -limit, limit)
+        xp = namespace_for(e)
+        self.integral = xp.where(self.learning, xp.clip(self.integral + e * self.dt, -limit, limit), self.integral)
         feedback = -(self.kp * e + self.ki * self.integral + self.kd * de)
         value = (ref_acc + feedback - drift) / gain
         return AxisOutput(value, de + self.lam * e, value, 0.0 * value)

@@ -60,7 +60,8 @@ from numba import njit
 
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.numeric import BATCH, namespace_for, select
-from quad_msgs_bridge.reference import ReferenceSample
+from quad_msgs_bridge.reference import REFERENCE_UNITS, ReferenceSample
+from quad_msgs_bridge.state import STATE_LAYOUT, STATE_NAMES
 from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, controls_from_forces
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
@@ -83,7 +84,6 @@ class ControlOutput(NamedTuple):
     attitude_reference: tuple[float, float, float]  #: phi_d, theta_d, psi_d [rad]
 
 
-STATE_LAYOUT = 'x, y, z [m, world ENU], vx, vy, vz [m/s, world], phi, theta, psi [rad], p, q, r [rad/s, body FLU]'
 
 
 def check_inputs(t: float, state: Sequence, reference: ReferenceSample, batch: int | None):
@@ -122,11 +122,49 @@ def check_inputs(t: float, state: Sequence, reference: ReferenceSample, batch: i
                                  f'{"a number" if np.ndim(value) == 0 else f"an array of shape {np.shape(value)}"} '
                                  'among them')
         xp = BATCH
+    try:
+        sized = (len(reference.position) == len(reference.velocity) == len(reference.acceleration)
+                 == len(reference.jerk) == len(reference.snap) == 3)
+    except TypeError:
+        sized = False
+    if not sized:
+        raise ValueError(_not_a_vector(reference))
     values = (*state, *reference.position, *reference.velocity, *reference.acceleration,
               reference.yaw, reference.yaw_rate, reference.yaw_acceleration, *reference.jerk, *reference.snap)
-    if not xp.all_finite(values):
+    try:
+        finite = xp.all_finite(values)
+    except TypeError:
+        raise ValueError(_not_a_number(state, reference)) from None
+    if not finite:
         raise ValueError(f'non-finite state or reference at t={t}')
     return xp
+
+
+def _not_a_vector(reference: ReferenceSample) -> str:
+    """What names the first vector field of ``reference`` that is not 3 values."""
+    for name in ('position', 'velocity', 'acceleration', 'jerk', 'snap'):
+        vector = getattr(reference, name)
+        if not hasattr(vector, '__len__') or len(vector) != 3:
+            return f'reference.{name}: expected 3 values [{REFERENCE_UNITS[name]}, world ENU], got {vector!r}'
+    return 'reference: a vector field is not 3 values'
+
+
+def _not_a_number(state: Sequence, reference: ReferenceSample) -> str:
+    """What names the first value of ``state`` or ``reference`` that is not a number (or array of numbers)."""
+    def numeric(value) -> bool:
+        try:
+            return np.asarray(value).dtype.kind in 'biuf' and not isinstance(value, (str, bytes))
+        except (TypeError, ValueError):
+            return False
+    named = [(f'state[{k}] ({name})', value) for k, (name, value) in enumerate(zip(STATE_NAMES, state))]
+    for field_name in ReferenceSample._fields:
+        value = getattr(reference, field_name)
+        named += ([(f'reference.{field_name}[{k}]', v) for k, v in enumerate(value)] if isinstance(value, tuple)
+                  else [(f'reference.{field_name}', value)])
+    for name, value in named:
+        if not numeric(value):
+            return f'{name}: expected a number, got {value!r} ({type(value).__name__})'
+    return 'state or reference: a value is not a number'
 
 
 def check_allocation(allocation: str) -> str:
@@ -250,8 +288,8 @@ class CascadedController:
         (:class:`.estimation.MeasurementStage`, applied by the closed loop and the controller node).
 
         ``takeoff_height`` > 0 [m, world z; the ground is z = 0]: while a vehicle's (filtered) height is
-        not above it, the networks of HELD_ON_GROUND do not learn (the laws' ``learning`` flag; laws
-        without one are not affected) and the desired roll and pitch are 0 (the x, y laws' outputs are
+        not above it, the networks and integrators of HELD_ON_GROUND hold (the laws' ``learning`` flag; the
+        sliding-mode laws have no state to hold) and the desired roll and pitch are 0 (the x, y laws' outputs are
         replaced by a zero horizontal acceleration: level on the ground); 0: the laws act and learn
         from the first update (paper).
 
@@ -274,7 +312,7 @@ class CascadedController:
         self.attitude_rates = attitude_rates
         self.takeoff_height = check_number('takeoff_height', takeoff_height, 0.0)
         self._held_on_ground = ([laws[axis] for axis in HELD_ON_GROUND if hasattr(laws[axis], 'learning')]
-                                if self.takeoff_height > 0.0 else [])
+                                if self.takeoff_height > 0.0 else [])   #: the laws with a state to hold
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
 
     def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
@@ -288,7 +326,7 @@ class CascadedController:
         p = self.params
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         laws = self.laws
-        if self._held_on_ground:
+        if self.takeoff_height > 0.0:
             airborne = z > self.takeoff_height
             for law in self._held_on_ground:
                 law.learning = airborne
@@ -300,7 +338,7 @@ class CascadedController:
         out_z = laws['z'].update(z - zd, vz - vzd, vzd, azd, -p.g - p.Kfz * vz / p.m, cphi * ctheta / p.m)
 
         ax_cmd, ay_cmd = out_x.value, out_y.value
-        if self._held_on_ground:   # level on the ground: tilting cannot move it, and tips it over at lift-off
+        if self.takeoff_height > 0.0:   # level on the ground: tilting cannot move it, and tips it over at lift-off
             ax_cmd, ay_cmd = xp.where(airborne, ax_cmd, 0.0), xp.where(airborne, ay_cmd, 0.0)
         phi_d, theta_d = self.attitude_from_accelerations(ax_cmd, ay_cmd, psi, z)
         f = self._filters
@@ -329,10 +367,10 @@ class CascadedController:
                                      1.0 / p.Iz)
 
         forces = allocate(self.allocation, out_z.value, out_phi.value, out_theta.value, out_psi.value,
-                          p.yaw_coefficient, p.F_min, p.F_max)
+                          p.mixer, p.F_min, p.F_max)
         return ControlOutput(
             forces=forces,
-            controls=controls_from_forces(*forces, p.yaw_coefficient),
+            controls=controls_from_forces(*forces, p.mixer),
             axes={'x': out_x, 'y': out_y, 'z': out_z, 'phi': out_phi, 'theta': out_theta, 'psi': out_psi},
             attitude_reference=(phi_d, theta_d, psi_d))
 

@@ -90,7 +90,7 @@ class ControllerNode(Node):
         self.diagnostics_pub = publisher(self, kit, CONTROL_DIAGNOSTICS, log=self.publication_log)
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs;
         # in realtime (latest_only) a controller that falls behind skips to the newest odometry
-        self.encode_forces = rotor_forces_encoder()
+        self.encode_forces = rotor_forces_encoder(self.params.rotor_names)
         self.encode_wrench = wrench_encoder(self.params.d, base_frame(self.get_namespace()))
         self.encode_reference = pose_stamped_encoder()
         self.encode_diagnostics = diagnostics_encoder()

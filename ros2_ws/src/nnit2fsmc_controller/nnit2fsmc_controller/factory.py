@@ -17,7 +17,10 @@ from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check
 from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
 from .controller import ATTITUDE_RATES, AXES, CascadedController
 from .estimation import MeasurementStage
+from .gain_units import check_hover_authority, in_vehicle_units
+from .indi import INDIController
 from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector, SaturationCorrector
+from .l1_adaptive import L1SE3Controller
 from .neural_network import MODIFICATIONS, EquivalentControlNetwork
 from .se3 import SE3Controller
 
@@ -25,7 +28,14 @@ DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controll
 #: the NNIT2FSMC's ablations (docs/ADAPTIVE.md): the IT2 term replaced by -K sat(S / Phi), type-1 fuzzy
 #: (lower membership functions = upper ones), learning off, and a network whose only input is the bias
 ABLATIONS = ('nnit2fsmc-sat', 'nnit2fsmc-type1', 'nnit2fsmc-nolearn', 'nnit2fsmc-bias')
-CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3') + ABLATIONS
+#: the adaptive baselines (docs/ADAPTIVE_BASELINES.md): L1 adaptive augmentation of se3, and INDI
+ADAPTIVE_BASELINES = ('l1-se3', 'indi')
+CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3') + ADAPTIVE_BASELINES + ABLATIONS
+#: the keys of the l1_se3 and indi sections (beside their axes), read as numbers
+L1_KEYS = ('predictor_pole_translation', 'predictor_pole_rotation', 'cutoff_translation_hz', 'cutoff_rotation_hz',
+           'estimate_limit_translation', 'estimate_limit_rotation')
+INDI_KEYS = ('rate_filter_hz', 'acceleration_filter_hz', 'motor_time_constant', 'effectiveness_rate',
+             'effectiveness_threshold', 'effectiveness_min', 'effectiveness_max')
 NN_INPUTS = 3   # (ref_vel, ref_acc, 1), see NNIT2FSMCLaw
 FEEDFORWARD_AXES = ('x', 'y')   #: where the virtual control is the subsystem's acceleration (nnit2fsmc.acceleration_feedforward)
 #: the paper-faithful value of every key that changes the controller away from the paper (docs/ADAPTIVE.md),
@@ -39,17 +49,20 @@ PAPER_FAITHFUL: dict = {
     'nnit2fsmc.axes.x.input_scale': 0.3, 'nnit2fsmc.axes.y.input_scale': 0.3,
     'nnit2fsmc.axes.x.fuzzy_gain': 3.0, 'nnit2fsmc.axes.y.fuzzy_gain': 3.0,
     'nnit2fsmc.axes.phi.input_scale': 2.0, 'nnit2fsmc.axes.theta.input_scale': 2.0,
-    'nnit2fsmc.axes.phi.fuzzy_gain': 1.0, 'nnit2fsmc.axes.theta.fuzzy_gain': 1.0,
+    # [rad/s^2]: 1 N of U2, U3 on the packaged vehicle, restated exactly (gain_units; config/controller.yaml)
+    'nnit2fsmc.axes.phi.fuzzy_gain': 65.31166727624223, 'nnit2fsmc.axes.theta.fuzzy_gain': 65.31166727624223,
     'nnit2fsmc.learning_rate_unit': 'per_update',
     'nnit2fsmc.modification': 'none',
     'common.measurement_filter_hz': 0.0, 'common.velocity_filter_hz': 0.0,
-    'nnit2fsmc.takeoff_height': 0.0,
+    'common.takeoff_height': 0.0,
     'nnit2fsmc.acceleration_feedforward': False,
     # the first tuning's x, y network (the paper gives no numbers): output cap and initial hidden weights
     'nnit2fsmc.axes.x.nn_gain': 1.5, 'nnit2fsmc.axes.y.nn_gain': 1.5, 'nnit2fsmc.initial_weight_spread': 0.5,
     'nnit2fsmc.axes.x.learning_rate': 0.01, 'nnit2fsmc.axes.y.learning_rate': 0.01,
-    'nnit2fsmc.axes.z.learning_rate': 0.002, 'nnit2fsmc.axes.phi.learning_rate': 0.05,
-    'nnit2fsmc.axes.theta.learning_rate': 0.05, 'nnit2fsmc.axes.psi.learning_rate': 30.0,
+    'nnit2fsmc.axes.x.max_adaptation_rate': 0.0, 'nnit2fsmc.axes.y.max_adaptation_rate': 0.0,
+    # per update, in acceleration units: 0.002, 0.05, 0.05 and 30 in N (N m) on the packaged vehicle, restated exactly
+    'nnit2fsmc.axes.z.learning_rate': 0.000472392, 'nnit2fsmc.axes.phi.learning_rate': 1.1721642272e-05,
+    'nnit2fsmc.axes.theta.learning_rate': 1.1721642272e-05, 'nnit2fsmc.axes.psi.learning_rate': 0.0017587057068000002,
 }
 
 
@@ -156,8 +169,9 @@ def control_period(gains: Mapping[str, Any]) -> float:
 LEARNING_RATE_UNITS = ('per_second', 'per_update')
 
 
-def learning_rate(gains: Mapping[str, Any], axis: str, dt: float) -> float:
-    """The network's rate alpha per update for subsystem ``axis`` at control period ``dt`` [s].
+def learning_rate(gains: Mapping[str, Any], axis: str, dt: float, params: VehicleParams) -> float:
+    """The network's rate alpha per update for subsystem ``axis`` at control period ``dt`` [s] on the nominal
+    vehicle ``params`` (stated in acceleration units, :mod:`.gain_units`; the law's is alpha b^2).
 
     ``nnit2fsmc.learning_rate_unit``: ``per_second`` (alpha of eqs. 6-7 is a rate per second, the
     continuous-time adaptation gain; the step per update is alpha dt, so a change of control rate
@@ -166,7 +180,8 @@ def learning_rate(gains: Mapping[str, Any], axis: str, dt: float) -> float:
     unit = _get(gains, 'nnit2fsmc.learning_rate_unit')
     if unit not in LEARNING_RATE_UNITS:
         raise ParameterError(f'nnit2fsmc.learning_rate_unit: {unit!r} is not one of {", ".join(LEARNING_RATE_UNITS)}')
-    alpha = _non_negative(gains, f'nnit2fsmc.axes.{axis}.learning_rate')
+    name = f'nnit2fsmc.axes.{axis}.learning_rate'
+    alpha = in_vehicle_units(name, _non_negative(gains, name), params, axis)
     return alpha * dt if unit == 'per_second' else alpha
 
 
@@ -185,13 +200,22 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
                      low_altitude_max_tilt=_positive(gains, 'common.low_altitude_max_tilt'),
                      low_altitude_height=_non_negative(gains, 'common.low_altitude_height'),
                      angle_filter_tau=_positive(gains, 'common.angle_filter_tau'),
-                     allocation=gains.get('common', {}).get('allocation', 'priority'))
-    if kind == 'se3':
+                     allocation=gains.get('common', {}).get('allocation', 'priority'),
+                     takeoff_height=_non_negative(gains, 'common.takeoff_height'), batch=batch)
+    if kind in ('se3', 'l1-se3'):
         se3_gains = {axis: tuple(_non_negative(gains, f'se3.axes.{axis}.{name}')
                                  for name in ('k_error', 'k_rate', 'k_integral', 'integral_limit')) for axis in AXES}
-        return SE3Controller(kind, params, se3_gains, lam, dt, **structure, batch=batch)
+        if kind == 'se3':
+            return SE3Controller(kind, params, se3_gains, lam, dt, **structure)
+        return L1SE3Controller(kind, params, se3_gains, lam, dt, {key: _get(gains, f'l1_se3.{key}') for key in L1_KEYS},
+                               **structure)
+    if kind == 'indi':
+        indi_gains = {axis: tuple(_non_negative(gains, f'indi.axes.{axis}.{name}') for name in ('k_error', 'k_rate'))
+                      for axis in AXES}
+        return INDIController(kind, params, indi_gains, lam, dt, {key: _get(gains, f'indi.{key}') for key in INDI_KEYS},
+                              **structure)
     if kind == 'nnit2fsmc' or kind in ABLATIONS:
-        laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch) for axis in AXES}
+        laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch, params) for axis in AXES}
     elif kind in ('smc-sign', 'smc-sat'):
         laws = {axis: SlidingModeLaw(
             lam[axis], _non_negative(gains, f'smc.switching_gain.{axis}'),
@@ -216,11 +240,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
             dt=dt) for axis in AXES}
     else:
         raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
-    return CascadedController(
-        kind, params, laws, dt, **structure, batch=batch,
-        attitude_rates=_get(gains, 'common.attitude_rates'),
-        takeoff_height=(_non_negative(gains, 'nnit2fsmc.takeoff_height')
-                        if kind == 'nnit2fsmc' or kind in ABLATIONS else 0.0))
+    return CascadedController(kind, params, laws, dt, **structure, attitude_rates=_get(gains, 'common.attitude_rates'))
 
 
 def build_measurement_stage(gains: Mapping[str, Any] | None = None) -> MeasurementStage:
@@ -249,12 +269,21 @@ def compile_kernels(kind: str, params: VehicleParams, gains: Mapping[str, Any] |
     quaternion_from_euler(0.0, 0.0, 0.0)
 
 
+def _authority(gains: Mapping[str, Any], name: str, params: VehicleParams, axis: str):
+    """The output cap ``name`` (fuzzy_gain or nn_gain, stated in acceleration units) in the law's units on the
+    nominal vehicle ``params``, after the hover check of :func:`.gain_units.check_hover_authority`."""
+    stated = _positive(gains, name) if name.endswith('nn_gain') else _non_negative(gains, name)
+    check_hover_authority(name, stated, params)
+    return in_vehicle_units(name, stated, params, axis)
+
+
 def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt: float,
-                  batch: int | None) -> NNIT2FSMCLaw:
-    """The NNIT2FSMC law of subsystem ``axis``, or of one of its ABLATIONS (``kind``)."""
+                  batch: int | None, params: VehicleParams) -> NNIT2FSMCLaw:
+    """The NNIT2FSMC law of subsystem ``axis``, or of one of its ABLATIONS (``kind``), on the nominal vehicle
+    ``params``: the gains file's acceleration units turned into the law's (:mod:`.gain_units`)."""
     key = f'nnit2fsmc.axes.{axis}'
     input_scale = _positive(gains, f'{key}.input_scale')
-    fuzzy_gain = _non_negative(gains, f'{key}.fuzzy_gain')
+    fuzzy_gain = _authority(gains, f'{key}.fuzzy_gain', params, axis)
     if kind == 'nnit2fsmc-sat':
         fuzzy = SaturationCorrector(input_scale, fuzzy_gain)
     else:
@@ -268,13 +297,14 @@ def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt
     network = EquivalentControlNetwork(
         n_inputs=1 if kind == 'nnit2fsmc-bias' else NN_INPUTS,
         n_hidden=int(_positive(gains, 'nnit2fsmc.hidden_units')),
-        output_gain=_positive(gains, f'{key}.nn_gain'),
-        learning_rate=0.0 if kind == 'nnit2fsmc-nolearn' else learning_rate(gains, axis, dt),
+        output_gain=_authority(gains, f'{key}.nn_gain', params, axis),
+        learning_rate=0.0 if kind == 'nnit2fsmc-nolearn' else learning_rate(gains, axis, dt, params),
         weight_limit=_positive(gains, 'nnit2fsmc.weight_limit'),
         initial_spread=_positive(gains, 'nnit2fsmc.initial_weight_spread'),
         seed=int(_non_negative(gains, 'nnit2fsmc.seed')) * len(AXES) + AXES.index(axis), batch=batch,
         modification=modification,
-        leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0)
+        leakage=_non_negative(gains, 'nnit2fsmc.leakage') * dt if modification != 'none' else 0.0,
+        max_rate=_non_negative(gains, f'{key}.max_adaptation_rate') * dt)
     return NNIT2FSMCLaw(lam, fuzzy, network, bias_only=kind == 'nnit2fsmc-bias',
                         feedforward=axis in FEEDFORWARD_AXES and _flag(gains, 'nnit2fsmc.acceleration_feedforward'))
 
@@ -318,8 +348,9 @@ GAIN_DESCRIPTIONS = {
                              'measurement stage of every controller kind (0: none, paper)',
     'velocity_filter_hz': 'cutoff of the first-order low-pass of the measured velocities [Hz], the measurement '
                           'stage of every controller kind (0: none, paper)',
-    'takeoff_height': 'height [m, ground at z = 0] below which the vehicle is kept level and the x, y and attitude '
-                      'networks do not learn (0: off, paper)',
+    'takeoff_height': 'height [m, ground at z = 0] below which every controller kind keeps the vehicle level and '
+                      'holds what it adapts or integrates on the x, y and attitude axes (networks, integrators, L1 '
+                      'estimates, INDI increments) (0: off, paper)',
     'acceleration_feedforward': 'x, y: add the reference acceleration to the NN and fuzzy terms (false: paper)',
     'modification': 'leakage of the NN learning: none (paper), sigma (sigma-modification) or e (e-modification)',
     'leakage': 'leakage rate sigma of the sigma- or e-modification [1/s]',
@@ -332,9 +363,14 @@ GAIN_DESCRIPTIONS = {
     'seed': 'seed of the initial hidden weights',
     'initial_weight_spread': 'the initial hidden weights are drawn uniformly from +-this (seeded by seed)',
     'input_scale': 'sliding-surface value that saturates the fuzzy input [units of S]',
-    'fuzzy_gain': 'IT2 fuzzy corrective output gain [units of the subsystem control]',
-    'nn_gain': 'NN output gain K_eq [units of the subsystem control]',
-    'learning_rate': 'NN learning rate alpha of eqs. (6)-(7), per second or per update (learning_rate_unit)',
+    'fuzzy_gain': 'IT2 fuzzy corrective output gain [m/s^2 or rad/s^2: the acceleration it gives; times m, Ix/d, '
+                  'Iy/d or Iz on the vehicle]',
+    'nn_gain': 'NN output gain K_eq [m/s^2 or rad/s^2: the acceleration it gives; times m, Ix/d, Iy/d or Iz on the '
+               'vehicle]',
+    'learning_rate': 'NN learning rate alpha of eqs. (6)-(7) in acceleration units, per second or per update '
+                     '(learning_rate_unit); divided by the square of m, Ix/d, Iy/d or Iz on the vehicle',
+    'max_adaptation_rate': 'largest adaptation rate of the NN [1/s]: the learning step is scaled down where the rate '
+                           'at which U_eq_hat follows the fuzzy term would exceed it (0: no bound, paper)',
     'learning_rate_unit': 'unit of the learning rates: per_second (alpha dt per update) or per_update (paper)',
     'boundary_layer': 'smc-sat boundary-layer width [units of S]',
     'switching_gain': 'SMC switching gain [units of the second derivative of the subsystem]',
@@ -343,9 +379,23 @@ GAIN_DESCRIPTIONS = {
     'slope': 'smc-integral linear gain inside the boundary layer [units of q\'\' per unit of S]',
     'integral_gain': 'smc-integral surface S = de + lambda e + integral_gain int(e) [1/s^2]',
     'gain_uncertainty': 'smc-integral relative control-gain uncertainty: adds this times |u_eq| to the switching gain',
-    'k_error': 'se3 attitude or position error gain, divided by J or m [1/s^2]',
-    'k_rate': 'se3 angular or linear velocity error gain, divided by J or m [1/s]',
+    'k_error': 'se3, indi attitude or position error gain, divided by J or m [1/s^2]',
+    'k_rate': 'se3, indi angular or linear velocity error gain, divided by J or m [1/s]',
     'k_integral': 'se3 integral gain, divided by J or m [1/s^3]',
+    'predictor_pole_translation': 'l1-se3: pole a_v of the velocity predictor, A_s = -a_v I [1/s]',
+    'predictor_pole_rotation': 'l1-se3: pole a_w of the body-rate predictor, A_s = -a_w I [1/s]',
+    'cutoff_translation_hz': 'l1-se3: cutoff of the low-pass C(s) of the thrust-axis compensation [Hz] (0: none)',
+    'cutoff_rotation_hz': 'l1-se3: cutoff of the low-pass C(s) of the angular-acceleration compensation [Hz] (0: none)',
+    'estimate_limit_translation': 'l1-se3: bound on each component of the acceleration estimate sigma_v [m/s^2]',
+    'estimate_limit_rotation': 'l1-se3: bound on each component of the angular-acceleration estimate sigma_w [rad/s^2]',
+    'rate_filter_hz': 'indi: cutoff of the low-pass of the body rates and of the modelled moment [Hz]',
+    'acceleration_filter_hz': 'indi: cutoff of the low-pass of the velocity and of the modelled thrust vector [Hz]',
+    'motor_time_constant': 'indi: time constant of the modelled first-order rotor response [s] (0: instantaneous)',
+    'effectiveness_rate': 'indi: normalised LMS step mu of the control-effectiveness estimate, in [0, 2) '
+                          '(0: not adapted)',
+    'effectiveness_threshold': 'indi: epsilon of the normalised LMS [rad/s^2]: increments well below it barely adapt',
+    'effectiveness_min': 'indi: lower bound of the effectiveness ratio eta (estimated / nominal), in (0, 1]',
+    'effectiveness_max': 'indi: upper bound of the effectiveness ratio eta (estimated / nominal), >= 1',
 }
 
 

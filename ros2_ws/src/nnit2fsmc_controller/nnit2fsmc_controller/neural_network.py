@@ -14,6 +14,18 @@ the fuzzy corrective term, so gradient descent with rate alpha gives
 Every weight is projected back onto [-weight_limit, weight_limit] after each update, so online
 learning cannot diverge whatever the fuzzy term does.
 
+Adaptation rate (docs/PAPER.md section 3, item (a) of issue 28). To first order one step moves the
+estimate by dU_eq_hat = k U_fuzzy dt, with the network's adaptation rate [1/s]
+
+    k = alpha K_eq^2 (1 - U_out^2)^2 (sum_j Y_j^2 / 4 + |Z|^2 sum_j Wy[j]^2 (1 - Y_j^2)^2 / 16)
+
+(the squared gradient of U_eq_hat over the weights): the network integrates the fuzzy term at rate
+k, which grows with its input power |Z|^2 and with the hidden activations. On a fast reference
+(large q_d', q_d'') k rises far above its value on a slow one, and an integral term that fast in
+the loop of the fuzzy term limit-cycles. ``max_rate`` k_max [per update; k_max dt for a rate per
+second] normalises the step (the normalised adaptive laws of Ioannou & Sun, *Robust Adaptive
+Control*, 1996, 4.3.3): every gradient is multiplied by min(1, k_max / k); 0 leaves it (paper).
+
 Optional leakage (robust adaptive control; docs/ADAPTIVE.md) of every weight W towards its initial
 value W0 (Wz: the seeded values, Wy: 0), with ``leakage`` l the share per update (sigma dt for a
 leakage rate sigma [1/s]):
@@ -86,9 +98,26 @@ def _clipped(value, limit):
 
 
 @njit(cache=True, inline='always')
+def _rate_factor(hidden_weights, output_weights, inputs, hidden, output, learning_rate, output_gain, max_rate):
+    """min(1, max_rate / k), k the adaptation rate per update at the forward pass (module docstring)."""
+    power = 0.0
+    for i in range(hidden_weights.shape[1]):
+        power += inputs[i] * inputs[i]
+    sensitivity = 0.0
+    for j in range(hidden_weights.shape[0]):
+        y = hidden[j]
+        slope = output_weights[j] * (1.0 - y * y)
+        sensitivity += 0.25 * y * y + power * slope * slope / 16.0
+    squashing = 1.0 - output * output
+    rate = learning_rate * output_gain * output_gain * squashing * squashing * sensitivity
+    return max_rate / rate if rate > max_rate else 1.0
+
+
+@njit(cache=True, inline='always')
 def learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, inputs, hidden, output, u_fuzzy,
-                  learning_rate, output_gain, leakage, e_modification, limit):
-    """One vehicle's gradient step, eqs. (6) and (7), with leakage and projection, in place.
+                  learning_rate, output_gain, leakage, e_modification, limit, max_rate):
+    """One vehicle's gradient step, eqs. (6) and (7), with leakage, the adaptation-rate bound ``max_rate``
+    (per update, 0: none; module docstring) and projection, in place.
 
     Both steps use the weights of the forward pass (``hidden``, ``output`` at ``inputs``), as eqs.
     (6)-(7) say: unit j's factors are taken before its output weight moves. A zero teaching signal
@@ -97,6 +126,9 @@ def learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, 
     if learning_rate == 0.0 or (u_fuzzy == 0.0 and (leakage == 0.0 or e_modification)):
         return
     common = _common_factor(learning_rate * u_fuzzy, output_gain, output)
+    if max_rate > 0.0:
+        common *= _rate_factor(hidden_weights, output_weights, inputs, hidden, output, learning_rate, output_gain,
+                               max_rate)
     leak = 0.0
     if leakage > 0.0:
         leak = leakage * (abs(u_fuzzy) / output_gain if e_modification else 1.0)
@@ -118,10 +150,10 @@ def _forward_batch(hidden_weights, output_weights, inputs, hidden, output):
 
 @njit(cache=True)
 def _learning_batch(hidden_weights, output_weights, hidden_anchor, output_anchor, inputs, hidden, output, u_fuzzy,
-                    learning_rate, output_gain, leakage, e_modification, limit):
+                    learning_rate, output_gain, leakage, e_modification, limit, max_rate):
     for b in range(output.shape[0]):
         learning_step(hidden_weights[b], output_weights[b], hidden_anchor[b], output_anchor[b], inputs[b], hidden[b],
-                      output[b], u_fuzzy[b], learning_rate, output_gain, leakage, e_modification, limit)
+                      output[b], u_fuzzy[b], learning_rate, output_gain, leakage, e_modification, limit, max_rate)
 
 
 class EquivalentControlNetwork:
@@ -132,9 +164,11 @@ class EquivalentControlNetwork:
 
     def __init__(self, n_inputs: int, n_hidden: int, output_gain: float, learning_rate: float,
                  weight_limit: float = 10.0, initial_spread: float = 0.5, seed: int = 0,
-                 batch: int | None = None, modification: str = 'none', leakage: float = 0.0):
+                 batch: int | None = None, modification: str = 'none', leakage: float = 0.0,
+                 max_rate: float = 0.0):
         """``batch``: None for one vehicle (float inputs and output), else the number of vehicles B.
-        ``modification``: one of MODIFICATIONS, with ``leakage`` the share per update, in [0, 1) (module docstring)."""
+        ``modification``: one of MODIFICATIONS, with ``leakage`` the share per update, in [0, 1) (module docstring).
+        ``max_rate``: the bound of the adaptation rate per update (module docstring; 0: none)."""
         self.output_gain = check_number('output_gain', output_gain, 0.0, low_inclusive=False)
         self.learning_rate = check_number('learning_rate', learning_rate, 0.0)
         self.weight_limit = check_number('weight_limit', weight_limit, 0.0, low_inclusive=False)
@@ -142,6 +176,7 @@ class EquivalentControlNetwork:
             raise ParameterError(f'modification: {modification!r} is not one of {", ".join(MODIFICATIONS)}')
         self.modification = modification
         self.leakage = check_number('leakage', leakage, 0.0, 1.0, high_inclusive=False) if modification != 'none' else 0.0
+        self.max_rate = check_number('max_rate', max_rate, 0.0)
         if n_inputs < 1 or n_hidden < 1:
             raise ValueError(f'network needs at least one input and one hidden unit, got {n_inputs}, {n_hidden}')
         rng = random.Random(seed)
@@ -155,10 +190,11 @@ class EquivalentControlNetwork:
         self.output_weights = np.zeros(vehicles + (n_hidden,))
         #: anchors W0 of the leakage: the initial weights
         self._hidden_anchor, self._output_anchor = self.hidden_weights.copy(), self.output_weights.copy()
-        #: (learning rate, K_eq, leakage, e-modification?, weight limit): the learning step's constants, in
-        #: :func:`learning_step`'s order (a network's constants are fixed when it is built; a retune builds a new one)
+        #: (learning rate, K_eq, leakage, e-modification?, weight limit, adaptation-rate bound): the learning
+        #: step's constants, in :func:`learning_step`'s order (a network's constants are fixed when it is built;
+        #: a retune builds a new one)
         self.kernel_constants = (self.learning_rate, self.output_gain, self.leakage, self.modification == 'e',
-                                 self.weight_limit)
+                                 self.weight_limit, self.max_rate)
         self._inputs = (0.0,) * n_inputs if batch is None else np.zeros((batch, n_inputs))
         self._hidden = np.zeros(vehicles + (n_hidden,))
         self._output = 0.0 if batch is None else np.zeros(batch)

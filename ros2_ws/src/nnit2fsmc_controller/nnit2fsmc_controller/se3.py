@@ -33,6 +33,14 @@ Choices (docs/BASELINES.md):
 * The nominal model's drag terms (translational 5.6e-4 N s/m, rotational friction) are not fed
   forward: Lee et al. have none, and they are below 1e-3 of the weight on the paper flight.
 
+Take-off (``takeoff_height``, the hold every kind shares, docs/ADAPTIVE_BASELINES.md): below it the
+horizontal part of F_d is 0 (lift-off level) and I_x (x, y) and I_R hold.
+
+The adaptive kinds keep this structure and replace its parts (:mod:`.l1_adaptive`, :mod:`.indi`):
+:meth:`SE3Controller.desired_force` (F_d), :meth:`SE3Controller.moment` (M of the desired angular
+acceleration), :meth:`SE3Controller.compensated` (an augmentation of U1..U4) and
+:meth:`SE3Controller.applied` (what the rotors were commanded, for a predictor).
+
 One controller steps one vehicle (floats) or a batch (numpy arrays, ``batch=B``), through the
 namespace of :mod:`quad_msgs_bridge.numeric`.
 """
@@ -103,7 +111,7 @@ class SE3Controller:
     def __init__(self, name: str, params: VehicleParams, gains: dict, lam: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
                  low_altitude_max_tilt: float | None = None, low_altitude_height: float = 0.0,
-                 batch: int | None = None):
+                 takeoff_height: float = 0.0, batch: int | None = None):
         self.name = name
         self.params = params
         self.batch = batch   #: None: one vehicle; B: update takes 12 arrays of B values
@@ -115,6 +123,9 @@ class SE3Controller:
         tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
         self.allocation = check_allocation(allocation)
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
+        #: [m, world z] below it the vehicle lifts off level and the x, y and attitude integrals hold (0: off);
+        #: the take-off hold every controller kind shares (:class:`.controller.CascadedController`)
+        self.takeoff_height = check_number('takeoff_height', takeoff_height, 0.0)
         self.position_integral = (0.0, 0.0, 0.0)    #: I_x [m s, world]
         self.attitude_integral = (0.0, 0.0, 0.0)    #: I_R [rad s, body]
 
@@ -125,10 +136,38 @@ class SE3Controller:
         """The slopes lambda [1/s] of the surfaces it reports, in AXES order (``control/diagnostics``)."""
         return tuple(self.lam[axis] for axis in AXES)
 
-    def _integrate(self, integral, error, axes):
+    def _integrate(self, integral, error, axes, held):
+        """The integrals of ``error`` over one period, clamped; those of the axes ``held`` (x, y and the attitude
+        on the ground, ``held`` the take-off hold) keep their value."""
         xp = namespace_for(*error)
-        return tuple(xp.clip(i + e * self.dt, -self.gains[a][3], self.gains[a][3])
+        return tuple(xp.where(held & (a != 'z'), i, xp.clip(i + e * self.dt, -self.gains[a][3], self.gains[a][3]))
                      for i, e, a in zip(integral, error, axes))
+
+    def on_ground(self, z):
+        """Whether the take-off hold applies at height z [m] (a bool, or one per vehicle of a batch)."""
+        return (z <= self.takeoff_height) & (self.takeoff_height > 0.0)
+
+    def desired_force(self, state, reference: ReferenceSample, acceleration, held) -> list:
+        """F_d [N, world] for the feedback acceleration ``acceleration`` [m/s^2, world]: m (feedback + xdd_d + g e3).
+        The adaptive kinds replace this (:mod:`.indi`)."""
+        p = self.params
+        force = [p.m * (fb + acc) for fb, acc in zip(acceleration, reference.acceleration)]
+        force[2] = force[2] + p.m * p.g
+        return force
+
+    def moment(self, state, angular_acceleration, gyroscopic, held):
+        """M [N m, body] realising the desired angular acceleration [rad/s^2, body] on the nominal model:
+        J angular_acceleration + Omega x J Omega. The adaptive kinds replace this."""
+        p = self.params
+        return tuple(j * a + g for j, a, g in zip((p.Ix, p.Iy, p.Iz), angular_acceleration, gyroscopic))
+
+    def compensated(self, state, rotation, thrust, controls, held):
+        """(U1 [N], (U2 [N], U3 [N], U4 [N m])) after an adaptive augmentation (:mod:`.l1_adaptive`); none here."""
+        return thrust, controls
+
+    def applied(self, state, controls, held) -> None:
+        """What the rotors were commanded (U1 [N], U2, U3 [N], U4 [N m], after the allocation), for the kinds
+        that predict with it; nothing to do here."""
 
     def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
         """Rotor thrusts [N] for the 12-state ``state`` and the reference at the same instant t [s].
@@ -142,11 +181,14 @@ class SE3Controller:
         position_axes, attitude_axes = AXES[:3], AXES[3:]
         ex = tuple(q - qd for q, qd in zip((x, y, z), reference.position))
         ev = tuple(v - vd for v, vd in zip((vx, vy, vz), reference.velocity))
-        self.position_integral = self._integrate(self.position_integral, ex, position_axes)
-        feedback = tuple(-p.m * (self.gains[a][0] * e + self.gains[a][1] * de + self.gains[a][2] * i)
-                         for a, e, de, i in zip(position_axes, ex, ev, self.position_integral))
-        force = [fb + p.m * acc for fb, acc in zip(feedback, reference.acceleration)]
-        force[2] = force[2] + p.m * p.g
+        held = self.on_ground(z)
+        self.position_integral = self._integrate(self.position_integral, ex, position_axes, held)
+        acceleration = tuple(-(self.gains[a][0] * e + self.gains[a][1] * de + self.gains[a][2] * i)
+                             for a, e, de, i in zip(position_axes, ex, ev, self.position_integral))
+        feedback = tuple(p.m * a for a in acceleration)
+        force = self.desired_force(state, reference, acceleration, held)
+        if self.takeoff_height > 0.0:    # level on the ground: tilting cannot move it, and tips it over at lift-off
+            force[0], force[1] = xp.where(held, 0.0, force[0]), xp.where(held, 0.0, force[1])
         lift = xp.maximum(force[2], MIN_LIFT * p.m * p.g)
         horizontal = xp.hypot(force[0], force[1])
         allowed = lift * self.tilt_limit.tangent(z)
@@ -180,25 +222,29 @@ class SE3Controller:
         e_r = _vee_of_antisymmetric_part(_transpose(relative))          # 1/2 vee(R_d^T R - R^T R_d)
         omega_d_body = _matvec(relative, omega_d)                       # R^T R_d Omega_d
         e_w = tuple(w - wd for w, wd in zip(omega, omega_d_body))
-        self.attitude_integral = self._integrate(self.attitude_integral, e_r, attitude_axes)
+        self.attitude_integral = self._integrate(self.attitude_integral, e_r, attitude_axes, held)
         inertia = (p.Ix, p.Iy, p.Iz)
         momentum = tuple(j * w for j, w in zip(inertia, omega))
         gyroscopic = _cross(omega, momentum)
         turning = _cross(omega, omega_d_body)
         feedforward_d = _matvec(relative, domega_d)
-        moment_feedback = tuple(-j * (self.gains[a][0] * er + self.gains[a][1] * ew + self.gains[a][2] * i)
-                                for a, j, er, ew, i in zip(attitude_axes, inertia, e_r, e_w, self.attitude_integral))
-        moment_model = tuple(g - j * (w - a) for g, j, w, a in zip(gyroscopic, inertia, turning, feedforward_d))
+        angular_feedback = tuple(-(self.gains[a][0] * er + self.gains[a][1] * ew + self.gains[a][2] * i)
+                                 for a, er, ew, i in zip(attitude_axes, e_r, e_w, self.attitude_integral))
+        angular_acceleration = tuple(fb - (w - a) for fb, w, a in zip(angular_feedback, turning, feedforward_d))
+        moment = self.moment(state, angular_acceleration, gyroscopic, held)
+        moment_feedback = tuple(j * fb for j, fb in zip(inertia, angular_feedback))
         scale = (p.d, p.d, 1.0)                                  # U2 = M_x / d, U3 = M_y / d, U4 = M_z
-        u2, u3, u4 = ((fb + mm) / s for fb, mm, s in zip(moment_feedback, moment_model, scale))
+        u2, u3, u4 = (m / s for m, s in zip(moment, scale))
+        thrust, (u2, u3, u4) = self.compensated(state, rotation, thrust, (u2, u3, u4), held)
 
-        forces = allocate(self.allocation, thrust, u2, u3, u4, p.yaw_coefficient, p.F_min, p.F_max)
+        forces = allocate(self.allocation, thrust, u2, u3, u4, p.mixer, p.F_min, p.F_max)
+        controls = controls_from_forces(*forces, p.mixer)
+        self.applied(state, controls, held)
         lam = self.lam
         axes = {a: AxisOutput(force[k] / p.m, ev[k] + lam[a] * ex[k], reference.acceleration[k],
                               force[k] / p.m - reference.acceleration[k])     # feedback, after the tilt limit
                 for k, a in enumerate(AXES[:2])}
         axes['z'] = AxisOutput(thrust, ev[2] + lam['z'] * ex[2], thrust - feedback[2], feedback[2])
-        axes.update({a: AxisOutput(u, e_w[k] + lam[a] * e_r[k], mm / s, fb / s) for k, (a, u, fb, mm, s)
-                     in enumerate(zip(attitude_axes, (u2, u3, u4), moment_feedback, moment_model, scale))})
-        return ControlOutput(forces=forces, controls=controls_from_forces(*forces, p.yaw_coefficient),
-                             axes=axes, attitude_reference=desired)
+        axes.update({a: AxisOutput(u, e_w[k] + lam[a] * e_r[k], u - fb / s, fb / s) for k, (a, u, fb, s)
+                     in enumerate(zip(attitude_axes, (u2, u3, u4), moment_feedback, scale))})
+        return ControlOutput(forces=forces, controls=controls, axes=axes, attitude_reference=desired)

@@ -69,9 +69,15 @@ GROUND_TRUTH = TopicSpec('ground_truth/odom', 'nav_msgs/msg/Odometry', LOCKSTEP,
 CLOCK = TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', LOCKSTEP, 'quad_sim -> all')
 TF = TopicSpec('/tf', 'tf2_msgs/msg/TFMessage', TF_QOS,
                'quad_sim -> tools: odom -> <namespace>/base_link of every vehicle, per odometry step')
+#: the vehicle as URDF (quad_msgs_bridge.urdf), latched as robot_state_publisher offers it, for RViz and Foxglove
+ROBOT_DESCRIPTION = TopicSpec('robot_description', 'std_msgs/msg/String', LATCHED,
+                              'quad_sim -> tools: the vehicle as URDF, from its vehicle file')
+#: as tf2's StaticBroadcasterQoS: reliable, transient local, keep last 1 (one message holds every vehicle's transforms)
+TF_STATIC = TopicSpec('/tf_static', 'tf2_msgs/msg/TFMessage', LATCHED,
+                      'quad_sim -> tools: <namespace>/base_link -> <namespace>/rotor_<i>, the URDF\'s fixed joints')
 
 ALL_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, GOAL_POSE, CONTROL_WRENCH,
-              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, TF, GROUND_TRUTH)
+              CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, TF, GROUND_TRUTH, ROBOT_DESCRIPTION, TF_STATIC)
 #: what a flight bag records by default
 RECORDED_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, CONTROL_WRENCH, CONTROL_REFERENCE,
                    CONTROL_DIAGNOSTICS, CLOCK, TF)

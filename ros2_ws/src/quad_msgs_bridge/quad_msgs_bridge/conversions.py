@@ -24,8 +24,13 @@ from quad_msgs_bridge.timebase import stamp_fields, stamp_seconds
 
 SUBSYSTEM_NAMES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
 DIAGNOSTIC_QUANTITIES = ('surface', 'nn_equivalent', 'fuzzy_corrective', 'lambda')
-ROTOR_FORCES_LABEL = 'rotor_thrust_N:' + ','.join(ROTOR_NAMES)
-ROTOR_FORCES_DIMS = ((ROTOR_FORCES_LABEL, 4),)
+
+
+def rotor_forces_dims(rotor_names: Sequence[str] = ROTOR_NAMES) -> tuple:
+    """The ``rotor_forces`` layout: one dimension labelled 'rotor_thrust_N:' and the rotor names F1..F4 of
+    the vehicle's layout (``VehicleParams.rotor_names``, e.g. F1_front,F2_right,... in the plus frame)."""
+    return (('rotor_thrust_N:' + ','.join(rotor_names), 4),)
+
 DIAGNOSTICS_DIMS = (('subsystem:' + ','.join(SUBSYSTEM_NAMES), 6), ('quantity:' + ','.join(DIAGNOSTIC_QUANTITIES), 4))
 
 
@@ -199,10 +204,11 @@ def tf_msg(kit: MessageKit, t: float, samples: Sequence[OdometrySample], child_f
         for sample, child in zip(samples, child_frame_ids)])
 
 
-def rotor_forces_msg(kit: MessageKit, forces: Sequence[float]):
-    """std_msgs/Float64MultiArray of the four rotor thrusts [N], layout labelled with the rotor order."""
+def rotor_forces_msg(kit: MessageKit, forces: Sequence[float], rotor_names: Sequence[str] = ROTOR_NAMES):
+    """std_msgs/Float64MultiArray of the four rotor thrusts [N], layout labelled with the rotor order
+    (``rotor_names`` of the vehicle's layout; default: the plus frame's)."""
     _finite(forces, 'rotor forces')
-    return _multi_array_msg(kit, ROTOR_FORCES_DIMS, [float(f) for f in forces])
+    return _multi_array_msg(kit, rotor_forces_dims(rotor_names), [float(f) for f in forces])
 
 
 def rotor_forces_from_msg(msg) -> tuple[float, float, float, float]:

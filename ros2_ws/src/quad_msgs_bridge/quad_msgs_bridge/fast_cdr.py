@@ -18,7 +18,8 @@ from itertools import chain
 from typing import Callable, Sequence
 
 from quad_msgs_bridge.contract import BASE_FRAME, ODOM_FRAME
-from quad_msgs_bridge.conversions import DIAGNOSTICS_DIMS, ROTOR_FORCES_DIMS, multi_array_dimensions
+from quad_msgs_bridge.conversions import DIAGNOSTICS_DIMS, multi_array_dimensions, rotor_forces_dims
+from quad_msgs_bridge.mixer import ROTOR_NAMES
 from quad_msgs_bridge.frames import quaternion_from_euler
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.timebase import stamp_seconds
@@ -135,12 +136,12 @@ def odometry_encoder(frame_id: str = ODOM_FRAME, child_frame_id: str = BASE_FRAM
     return encode
 
 
-def rotor_forces_encoder() -> Callable[[Sequence[float]], bytes]:
-    """encode(forces) -> CDR of ``conversions.rotor_forces_msg(kit, forces)`` (four thrusts [N]).
+def rotor_forces_encoder(rotor_names: Sequence[str] = ROTOR_NAMES) -> Callable[[Sequence[float]], bytes]:
+    """encode(forces) -> CDR of ``conversions.rotor_forces_msg(kit, forces, rotor_names)`` (four thrusts [N]).
 
     Unlike rotor_forces_msg it does not check the values: it records what was sent.
     """
-    pack, (constant,) = _multi_array_layout(ROTOR_FORCES_DIMS).compile()
+    pack, (constant,) = _multi_array_layout(rotor_forces_dims(rotor_names)).compile()
     pack = pack.pack
 
     def encode(forces: Sequence[float]) -> bytes:

@@ -1,11 +1,14 @@
-"""Paper eq. (2): rotor thrusts F1..F4 <-> virtual controls U1..U4, and rotor saturation.
+"""Paper eq. (2): rotor thrusts F1..F4 <-> virtual controls U1..U4, and rotor saturation, for a rotor layout.
 
-Rotor layout (body FLU, the order of the ``rotor_forces`` array): F1 front (+x), F2 right (-y),
-F3 back (-x), F4 left (+y). With this layout d U2 is the roll torque and d U3 the pitch torque
-of eq. (1); rotors 2 and 4 turn clockwise seen from above, so their reaction torque is +z.
-All functions work on plain floats and elementwise on numpy arrays (one element per vehicle): each is a
-compiled kernel (numba) that also runs inside the other kernels (the model's rotors, a controller's
-output), written once for both.
+The layout (:mod:`quad_msgs_bridge.rotor_layout`; a vehicle's ``VehicleParams.mixer``, an array) says where rotors
+F1..F4 (the order of the ``rotor_forces`` array) sit and which way they spin. In the paper's "+"
+frame F1 is front (+x, body FLU), F2 right (-y), F3 back (-x), F4 left (+y), F2 and F4 turn
+clockwise seen from above (their reaction torque is +z): then U2 = F4 - F2, U3 = F3 - F1 and
+U4 = Kd/Kp (-F1 + F2 - F3 + F4), with the same floating-point operations as eq. (2) printed. In every
+layout d U2 is the roll torque and d U3 the pitch torque of eq. (1), U4 the yaw torque.
+All functions work on plain floats and elementwise on numpy arrays (one element per vehicle, one
+layout): each is a compiled kernel (numba) that also runs inside the other kernels (the model's
+rotors, a controller's output), written once for both.
 """
 from __future__ import annotations
 
@@ -13,31 +16,42 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.numeric import every, select
+from quad_msgs_bridge.rotor_layout import PAIRS, PITCH, ROLL, SPIN, YAW, YAW_COEFFICIENT, rotor_names
 
-ROTOR_NAMES = ('F1_front', 'F2_right', 'F3_back', 'F4_left')
+ROTOR_NAMES = rotor_names('plus')   #: F1..F4 of the paper's "+" frame (a vehicle's own: VehicleParams.rotor_names)
 ALLOCATIONS = ('priority', 'clip')   #: how U1..U4 beyond the rotor limits become thrusts (:func:`allocate`)
 CONTROL_NAMES = ('U1', 'U2', 'U3', 'U4')
 CONTROL_UNITS = ('N', 'N', 'N', 'N m')   #: of U1..U4
 
 
 @njit(cache=True, inline='always')
-def controls_from_forces(f1, f2, f3, f4, yaw_coefficient):
-    """Eq. (2): (U1 [N], U2 [N], U3 [N], U4 [N m]) from rotor thrusts [N]; yaw_coefficient = Kd/Kp [m]."""
+def controls_from_forces(f1, f2, f3, f4, mixer):
+    """Eq. (2): (U1 [N], U2 [N], U3 [N], U4 [N m]) from rotor thrusts [N] in the layout ``mixer`` (its
+    per-rotor coefficients y_i/d, -x_i/d, -s_i and Kd/Kp: :mod:`quad_msgs_bridge.rotor_layout`)."""
     return (f1 + f2 + f3 + f4,
-            f4 - f2,
-            f3 - f1,
-            yaw_coefficient * (-f1 + f2 - f3 + f4))
+            mixer[ROLL] * f1 + mixer[ROLL + 1] * f2 + mixer[ROLL + 2] * f3 + mixer[ROLL + 3] * f4,
+            mixer[PITCH] * f1 + mixer[PITCH + 1] * f2 + mixer[PITCH + 2] * f3 + mixer[PITCH + 3] * f4,
+            mixer[YAW_COEFFICIENT] * (mixer[YAW] * f1 + mixer[YAW + 1] * f2 + mixer[YAW + 2] * f3
+                                      + mixer[YAW + 3] * f4))
+
+
+@njit(cache=True, inline='always')
+def pair_torques(u2, u3, mixer):
+    """(t13, t24) [N]: the thrust differences F3 - F1 and F4 - F2 that give U2, U3 [N] in the layout."""
+    return mixer[PAIRS] * u2 + mixer[PAIRS + 1] * u3, mixer[PAIRS + 2] * u2 + mixer[PAIRS + 3] * u3
 
 
 @njit(cache=True, inline='always', error_model='numpy')
-def forces_from_controls(u1, u2, u3, u4, yaw_coefficient):
+def forces_from_controls(u1, u2, u3, u4, mixer):
     """Inverse of eq. (2): rotor thrusts (F1..F4) [N] that produce U1..U4 exactly (no limits)."""
-    front_back = 0.5 * (u1 - u4 / yaw_coefficient)   # F1 + F3
-    left_right = 0.5 * (u1 + u4 / yaw_coefficient)   # F2 + F4
-    return (0.5 * (front_back - u3),
-            0.5 * (left_right - u2),
-            0.5 * (front_back + u3),
-            0.5 * (left_right + u2))
+    t13, t24 = pair_torques(u2, u3, mixer)
+    spin_yaw = mixer[SPIN] * (u4 / mixer[YAW_COEFFICIENT])
+    first_third = 0.5 * (u1 - spin_yaw)    # F1 + F3
+    second_fourth = 0.5 * (u1 + spin_yaw)  # F2 + F4
+    return (0.5 * (first_third - t13),
+            0.5 * (second_fourth - t24),
+            0.5 * (first_third + t13),
+            0.5 * (second_fourth + t24))
 
 
 @njit(cache=True, inline='always')
@@ -59,13 +73,13 @@ def saturate_forces(forces, f_min, f_max):
 
 
 @njit(cache=True, error_model='numpy')
-def clip_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
+def clip_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
     """Rotor thrusts [N] for U1..U4 by the exact inverse of eq. (2), each then clipped to [f_min, f_max].
 
     Paper-faithful (the paper has no rotor limits), but a large yaw or roll demand can take lift away:
     two rotors clipped at f_min leave U1 below what was commanded.
     """
-    return saturated(forces_from_controls(u1, u2, u3, u4, yaw_coefficient), f_min, f_max)
+    return saturated(forces_from_controls(u1, u2, u3, u4, mixer), f_min, f_max)
 
 
 @njit(cache=True, inline='always', error_model='numpy')
@@ -75,12 +89,13 @@ def _most(room, size):
 
 
 @njit(cache=True, error_model='numpy')
-def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
+def priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
     """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m]: thrust first, then roll and pitch, yaw last.
 
-    With the mean thrust m = U1/4, the half torques h_r = U2/2, h_p = U3/2 and the yaw shift
-    y = U4/(4 c) (c = yaw_coefficient [m]; y moves thrust from rotors 1, 3 to rotors 2, 4), eq. (2)
-    inverted reads F1 = m - h_p - y, F2 = m - h_r + y, F3 = m + h_p - y, F4 = m + h_r + y.
+    With the mean thrust m = U1/4, the pair torques (t13, t24) of U2, U3 (:func:`pair_torques`; in
+    the "+" frame t13 = U3, t24 = U2) and the yaw shift y = s_1 U4/(4 c) (c = Kd/Kp [m]; y moves
+    thrust from rotors 1, 3 to rotors 2, 4), eq. (2) inverted reads F1 = m - t13/2 - y,
+    F2 = m - t24/2 + y, F3 = m + t13/2 - y, F4 = m + t24/2 + y.
 
     1. U1 is clipped to [4 f_min, 4 f_max] (what four rotors can give); it is then realised exactly.
     2. U2 and U3 are scaled by the largest common factor s in [0, 1] (the direction of the roll/pitch
@@ -93,16 +108,17 @@ def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
     (elementwise, one element per vehicle).
     """
     mean = 0.25 * clipped(u1, 4.0 * f_min, 4.0 * f_max)
-    yaw = 0.25 * u4 / yaw_coefficient
+    t13, t24 = pair_torques(u2, u3, mixer)
+    yaw = mixer[SPIN] * (0.25 * u4 / mixer[YAW_COEFFICIENT])
     # the common case first: the demand fits (s = 1, the demanded yaw shift), computed as below
-    demanded = (mean - 0.5 * u3 - yaw, mean - 0.5 * u2 + yaw, mean + 0.5 * u3 - yaw, mean + 0.5 * u2 + yaw)
+    demanded = (mean - 0.5 * t13 - yaw, mean - 0.5 * t24 + yaw, mean + 0.5 * t13 - yaw, mean + 0.5 * t24 + yaw)
     fits = ((np.minimum(np.minimum(demanded[0], demanded[1]), np.minimum(demanded[2], demanded[3])) >= f_min)
             & (np.maximum(np.maximum(demanded[0], demanded[1]), np.maximum(demanded[2], demanded[3])) <= f_max))
     if every(fits):
         return demanded
     below, above = mean - f_min, f_max - mean                 # room of the mean thrust, >= 0
     low, high = np.minimum(yaw, 0.0), np.maximum(yaw, 0.0)   # the yaw shifts allowed: between 0 and the demand
-    pitch, roll = 0.5 * np.abs(u3), 0.5 * np.abs(u2)
+    pitch, roll = 0.5 * np.abs(t13), 0.5 * np.abs(t24)     # half pair torques ("+": pitch and roll)
     # every rotor in range for some shift in [low, high]: the lower bounds of the shift (rotors 1, 3 below
     # f_max; 2, 4 above f_min) below its upper bounds (1, 3 above f_min; 2, 4 below f_max) and the demand range
     scale = _most(f_max - f_min, 2.0 * pitch)
@@ -113,7 +129,7 @@ def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
     scale = np.minimum(scale, _most(below + high, roll))
     scale = np.minimum(scale, _most(below - low, pitch))
     scale = np.minimum(scale, _most(above - low, roll))
-    half_roll, half_pitch = 0.5 * scale * u2, 0.5 * scale * u3
+    half_roll, half_pitch = 0.5 * scale * t24, 0.5 * scale * t13
     shift = clipped(yaw, np.maximum(scale * pitch - above, scale * roll - below),
                     np.minimum(below - scale * pitch, above - scale * roll))
     forces = (mean - half_pitch - shift, mean - half_roll + shift, mean + half_pitch - shift, mean + half_roll + shift)
@@ -122,11 +138,11 @@ def priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
             select(fits, demanded[2], forces[2]), select(fits, demanded[3], forces[3]))
 
 
-def allocate(allocation, u1, u2, u3, u4, yaw_coefficient, f_min, f_max):
+def allocate(allocation, u1, u2, u3, u4, mixer, f_min, f_max):
     """Rotor thrusts [N] for U1..U4 by ``allocation``: 'priority' (:func:`priority_allocation`) or
-    'clip' (:func:`clip_allocation`)."""
+    'clip' (:func:`clip_allocation`), in the layout ``mixer`` (``VehicleParams.mixer``)."""
     if allocation == 'priority':
-        return priority_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max)
+        return priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
     if allocation == 'clip':
-        return clip_allocation(u1, u2, u3, u4, yaw_coefficient, f_min, f_max)
+        return clip_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
     raise ValueError(f'allocation {allocation!r} is not one of {", ".join(ALLOCATIONS)}')

@@ -17,8 +17,14 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.frames import wrap_angle
+from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 Vec3 = tuple[float, float, float]
+
+
+#: the unit of each field of a ReferenceSample
+REFERENCE_UNITS = {'position': 'm', 'velocity': 'm/s', 'acceleration': 'm/s^2', 'yaw': 'rad', 'yaw_rate': 'rad/s',
+                   'yaw_acceleration': 'rad/s^2', 'jerk': 'm/s^3', 'snap': 'm/s^4'}
 
 
 class ReferenceSample(NamedTuple):
@@ -34,9 +40,23 @@ class ReferenceSample(NamedTuple):
     snap: Vec3 = (0.0, 0.0, 0.0)   #: [m/s^4, world ENU] (zeros where a source has none)
 
 
+_ZERO = (0.0, 0.0, 0.0)
+
+
 def hold(position: Sequence[float], yaw: float = 0.0) -> ReferenceSample:
-    """A reference that holds ``position`` [m, world ENU] at heading ``yaw`` [rad]."""
-    return ReferenceSample(tuple(float(v) for v in position), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), float(yaw))
+    """A reference that holds ``position`` [m, world ENU] at heading ``yaw`` [rad]; ParameterError (a
+    ValueError) naming the argument unless ``position`` is 3 finite numbers and ``yaw`` one."""
+    if type(position) is tuple and len(position) == 3 and type(yaw) is float:   # the usual case, per control step
+        x, y, z = position
+        if type(x) is float and type(y) is float and type(z) is float and math.isfinite(x + y + z + yaw):
+            return ReferenceSample(position, _ZERO, _ZERO, yaw)
+    if isinstance(position, (str, bytes)) or not isinstance(position, (Sequence, np.ndarray)) or len(position) != 3:
+        raise ParameterError(f'position: expected 3 numbers x, y, z [m, world ENU], got {position!r}')
+
+    def number(name: str, value) -> float:
+        return check_number(name, value.item() if isinstance(value, np.generic) else value)
+    point = tuple(number(f'position[{k}]', v) for k, v in enumerate(position))
+    return ReferenceSample(point, _ZERO, _ZERO, number('yaw', yaw))
 
 
 def _quintic_coefficients(p0, v0, a0, p1, v1, a1, h) -> tuple:

@@ -26,6 +26,9 @@ from quad_msgs_bridge.frames import (Quat, Vec3, _body_rates, _body_to_world, _e
 X, Y, Z, VX, VY, VZ, PHI, THETA, PSI, DPHI, DTHETA, DPSI = range(12)
 STATE_SIZE = 12
 STATE_NAMES = ('x', 'y', 'z', 'vx', 'vy', 'vz', 'phi', 'theta', 'psi', 'dphi', 'dtheta', 'dpsi')
+#: the 12 core states in words, as error messages and docs give them (the table above)
+STATE_LAYOUT = ('x, y, z [m, world ENU], vx, vy, vz [m/s, world ENU], phi, theta, psi [rad] (Z-Y-X Euler angles), '
+                'dphi, dtheta, dpsi [rad/s] (Euler-angle rates, not body rates)')
 
 
 class OdometrySample(NamedTuple):

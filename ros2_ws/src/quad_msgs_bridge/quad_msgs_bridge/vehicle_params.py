@@ -17,12 +17,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
+from functools import cached_property
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import yaml
 
+from quad_msgs_bridge.rotor_layout import (FRAMES, STANDARD_DIRECTIONS, frame_positions, layout_problem, rotor_mixer,
+                                           rotor_names)
+
 DEFAULT_VEHICLE_FILE = Path(__file__).resolve().parent / 'config' / 'vehicle.yaml'
+#: the shipped vehicles of real quadrotors, by name (docs/VEHICLES.md); 'paper' is DEFAULT_VEHICLE_FILE
+SHIPPED_VEHICLES = Path(__file__).resolve().parent / 'config' / 'vehicles'
 
 #: [N s/m] Linear drag of the whole vehicle against the air, used when a wind model is on. RotorPy's
 #: AscTec Hummingbird (0.500 kg; rotorpy/vehicles/hummingbird_params.py) has the rotor drag
@@ -106,7 +112,10 @@ _RANGES = {
 #: Fields holding one value per body axis (3) or per rotor (4), in the rotor order of the mixer.
 _VECTOR_LENGTHS = {'cog_offset': 3, 'rotor_thrust_factors': 4, 'rotor_drag_factors': 4, 'rotor_efficiency_loss': 4}
 #: Keys a vehicle file may leave out (their defaults leave the vehicle unperturbed).
-_OPTIONAL = ('cog_offset', 'rotor_thrust_factors', 'rotor_drag_factors', 'rotor_efficiency_loss', 'wind_drag')
+_OPTIONAL = ('cog_offset', 'rotor_thrust_factors', 'rotor_drag_factors', 'rotor_efficiency_loss', 'wind_drag',
+             'frame', 'rotor_positions', 'rotor_directions')
+#: the rotor layout's keys (quad_msgs_bridge.rotor_layout): one layout per description, also for a batch
+_LAYOUT = ('frame', 'rotor_positions', 'rotor_directions')
 
 
 def _pick(value, vehicle: int | None):
@@ -138,6 +147,14 @@ class VehicleParams:
     centre; with the centre of gravity at ``cog_offset`` = (c_x, c_y, c_z) from it, the moment
     about the centre of gravity is sum (r_i - c) x (0, 0, T_i), i.e. roll d U2 - c_y U1 and pitch
     d U3 + c_x U1 (c_z drops out: every thrust is parallel to body z).
+
+    Rotor layout (:mod:`quad_msgs_bridge.rotor_layout`): ``frame`` 'plus' (the paper's, the default) or
+    'x' places the rotors at the arm length d, in place of any ``rotor_positions`` given
+    (``rotor_directions`` may mirror the spins); 'custom' takes ``rotor_positions`` and
+    ``rotor_directions`` as given. After construction both hold the
+    layout in use: ``rotor_positions`` four (x, y, z) [m, body FLU] from the geometric centre, in the
+    order F1..F4 of ``rotor_forces``, and ``rotor_directions`` four +1 (counter-clockwise seen from
+    above) or -1. A batch flies one layout.
     """
 
     m: float        #: [kg] total mass
@@ -161,6 +178,9 @@ class VehicleParams:
     rotor_drag_factors: tuple = (1.0, 1.0, 1.0, 1.0)     #: [-] Kd_i / Kd of rotors F1..F4
     rotor_efficiency_loss: tuple = (0.0, 0.0, 0.0, 0.0)  #: [-] in [0, 1): lost fraction of w_i^2 of F1..F4
     wind_drag: float = DEFAULT_WIND_DRAG                 #: [N s/m] drag against the air when wind is on
+    frame: str = 'plus'                                  #: rotor layout: 'plus', 'x' or 'custom'
+    rotor_positions: tuple | None = None                 #: [m, body FLU] (x, y, z) of F1..F4 (None: from frame, d)
+    rotor_directions: tuple | None = None                #: [-] +1 CCW / -1 CW from above, F1..F4 (None: 1, -1, 1, -1)
 
     def __post_init__(self):
         """Check every value (element by element for a batch) and store floats, float arrays and tuples."""
@@ -183,15 +203,43 @@ class VehicleParams:
             first = next(iter(sizes))
             other = next(name for name, size in sizes.items() if size != sizes[first])
             raise ParameterError(f'vehicle.{other}: {sizes[other]} vehicles, but vehicle.{first} has {sizes[first]}')
+        self._resolve_layout()
         self._check_limits()
+
+    def _resolve_layout(self) -> None:
+        """Check ``frame``, ``rotor_positions`` and ``rotor_directions`` and store the layout in use."""
+        if self.frame not in FRAMES:
+            raise ParameterError(f'vehicle.frame: {self.frame!r} is not one of {", ".join(FRAMES)}')
+        directions = _rotor_directions(STANDARD_DIRECTIONS if self.rotor_directions is None else self.rotor_directions)
+        if self.frame == 'custom':
+            if self.rotor_positions is None:
+                raise ParameterError('vehicle.rotor_positions: frame custom needs rotor_positions and rotor_directions')
+            if self.rotor_directions is None:
+                raise ParameterError('vehicle.rotor_directions: frame custom needs rotor_positions and '
+                                     'rotor_directions')
+            positions = _rotor_positions(self.rotor_positions)
+        else:
+            arm = self.d
+            if isinstance(arm, np.ndarray):
+                if np.any(arm != arm[0]):
+                    raise ParameterError(f'vehicle.d: a batch flies one rotor layout, but frame {self.frame} places '
+                                         f'the rotors at different arm lengths {arm.tolist()}')
+                arm = float(arm[0])
+            positions = frame_positions(self.frame, arm)     # replaces any given (dataclasses.replace carries them)
+        problem = layout_problem(positions, directions)
+        if problem:
+            raise ParameterError(f'vehicle.rotor_positions: the mixer cannot allocate for this layout: {problem}')
+        object.__setattr__(self, 'rotor_positions', positions)
+        object.__setattr__(self, 'rotor_directions', directions)
 
     def _check_limits(self) -> None:
         weight = self.m * self.g
         _require(self.F_max > self.F_min,
                  lambda i: f'vehicle.F_max: {_pick(self.F_max, i)} must exceed F_min = {_pick(self.F_min, i)}')
         _require(4.0 * self.F_max > weight,
-                 lambda i: f'vehicle.F_max: {_pick(self.F_max, i)} N cannot hover the vehicle; valid range '
-                           f'({_pick(weight, i) / 4.0}, inf)')
+                 lambda i: f'vehicle.F_max: {_pick(self.F_max, i)} N cannot hover the vehicle of mass m = '
+                           f'{_pick(self.m, i):g} kg (weight {_pick(weight, i):.4g} N): four rotors give '
+                           f'{4.0 * _pick(self.F_max, i):.4g} N; valid range ({_pick(weight, i) / 4.0}, inf)')
         _require(4.0 * self.F_min < weight,
                  lambda i: f'vehicle.F_min: {_pick(self.F_min, i)} N cannot descend; valid range '
                            f'[0, {_pick(weight, i) / 4.0})')
@@ -210,12 +258,32 @@ class VehicleParams:
         """Per-rotor thrust [N] that balances gravity."""
         return self.m * self.g / 4.0
 
+    @property
+    def rotor_names(self) -> tuple[str, str, str, str]:
+        """Labels of F1..F4 in this layout (e.g. 'F1_front' in the plus frame): plots, ``rotor_forces``."""
+        return rotor_names(self.frame, self.rotor_positions)
+
+    @cached_property
+    def mixer(self) -> np.ndarray:
+        """The layout as the mixer kernels read it (:mod:`quad_msgs_bridge.rotor_layout`, ROLL ... SPIN):
+        MIXER_SIZE floats, or (B, MIXER_SIZE) for a batch (the model's constants take it row by row)."""
+        return rotor_mixer(self.rotor_positions, self.rotor_directions, self.d, self.yaw_coefficient)
+
     @classmethod
     def from_mapping(cls, values: Mapping[str, Any]) -> 'VehicleParams':
-        """The description in a YAML/JSON mapping: Table I keys required, the perturbation keys optional."""
+        """The description in a YAML/JSON mapping: Table I keys required, the perturbation and layout keys
+        optional (rotor positions without a frame make the frame custom; with frame plus or x they must
+        be the frame's, as a description written by ``dataclasses.asdict`` has them)."""
         names = [f.name for f in fields(cls)]
         _check_keys('vehicle', values, [n for n in names if n not in _OPTIONAL], _OPTIONAL)
-        return cls(**{name: values[name] for name in names if name in values})
+        chosen = {name: values[name] for name in names if name in values}
+        if 'rotor_positions' in chosen:
+            chosen.setdefault('frame', 'custom')
+        params = cls(**chosen)
+        if 'rotor_positions' in chosen and _rotor_positions(chosen['rotor_positions']) != params.rotor_positions:
+            raise ParameterError(f'vehicle.rotor_positions: frame {params.frame} places the rotors itself (at '
+                                 f'{params.rotor_positions}); leave out frame (or give frame: custom) to place them')
+        return params
 
     @classmethod
     def stack(cls, vehicles: Sequence['VehicleParams']) -> 'VehicleParams':
@@ -228,8 +296,36 @@ class VehicleParams:
             return np.array([getattr(v, name) if index is None else getattr(v, name)[index] for v in vehicles],
                             dtype=float)
 
+        first = vehicles[0]
+        for k, vehicle in enumerate(vehicles):
+            for name in _LAYOUT:
+                if getattr(vehicle, name) != getattr(first, name):
+                    raise ParameterError(f'vehicles: a batch flies one rotor layout, but vehicle {k} has {name} '
+                                         f'{getattr(vehicle, name)} and vehicle 0 {getattr(first, name)}')
         return cls(**{name: tuple(column(name, i) for i in range(_VECTOR_LENGTHS[name]))
-                      if name in _VECTOR_LENGTHS else column(name) for name in _RANGES})
+                      if name in _VECTOR_LENGTHS else column(name) for name in _RANGES},
+                   **{name: getattr(first, name) for name in _LAYOUT})
+
+
+def _rotor_positions(value) -> tuple:
+    """Four rotor positions (x, y, z) [m, body FLU] as float tuples, or ParameterError."""
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence) or len(value) != 4 or any(
+            isinstance(p, (str, bytes, Mapping)) or not isinstance(p, Sequence) or len(p) != 3 for p in value):
+        raise ParameterError(f'vehicle.rotor_positions: expected 4 positions [x, y, z] [m, body FLU], got {value!r}')
+    return tuple(tuple(check_number(f'vehicle.rotor_positions[{i}][{k}]', c) for k, c in enumerate(p))
+                 for i, p in enumerate(value))
+
+
+def _rotor_directions(value) -> tuple:
+    """Four spin directions, each +1 (counter-clockwise seen from above) or -1, as ints, or ParameterError."""
+    if isinstance(value, (str, bytes, Mapping)) or not isinstance(value, Sequence) or len(value) != 4:
+        raise ParameterError(f'vehicle.rotor_directions: expected 4 values, each +1 (counter-clockwise seen from '
+                             f'above) or -1, got {value!r}')
+    for i, s in enumerate(value):
+        if isinstance(s, bool) or s not in (1, -1):
+            raise ParameterError(f'vehicle.rotor_directions[{i}]: {s!r} is not +1 (counter-clockwise seen from '
+                                 f'above) or -1')
+    return tuple(int(s) for s in value)
 
 
 @dataclass(frozen=True)
@@ -285,13 +381,31 @@ class Disturbances:
         return cls(enabled=enabled, **channels)
 
 
+def shipped_vehicles() -> dict[str, Path]:
+    """The shipped vehicle files by name: 'paper' (the packaged default) and those of SHIPPED_VEHICLES."""
+    return {'paper': DEFAULT_VEHICLE_FILE, **{p.stem: p for p in sorted(SHIPPED_VEHICLES.glob('*.yaml'))}}
+
+
+def locate_vehicle(path: str | Path | None) -> Path:
+    """The vehicle file of ``path``: a file that exists, else the shipped vehicle of that name
+    (``x500`` or ``x500.yaml``), else ``path`` as given; None: the packaged default."""
+    if path is None:
+        return DEFAULT_VEHICLE_FILE
+    path = Path(path)
+    if path.exists() or path.parent != Path('.'):
+        return path
+    return shipped_vehicles().get(path.name[:-len('.yaml')] if path.suffix == '.yaml' else path.name, path)
+
+
 def load_vehicle_file(path: str | Path | None = None) -> tuple[VehicleParams, Disturbances]:
-    """Read and validate a vehicle YAML file (default: the packaged ``config/vehicle.yaml``)."""
-    path = Path(path) if path is not None else DEFAULT_VEHICLE_FILE
+    """Read and validate a vehicle YAML file, or a shipped vehicle by name (:func:`locate_vehicle`;
+    default: the packaged ``config/vehicle.yaml``, the paper's)."""
+    path = locate_vehicle(path)
     try:
         document = yaml.safe_load(path.read_text())
     except OSError as error:
-        raise ParameterError(f'vehicle file {path}: {error.strerror}') from error
+        raise ParameterError(f'vehicle file {path}: {error.strerror} (shipped vehicles: '
+                             f'{", ".join(shipped_vehicles())})') from error
     except yaml.YAMLError as error:
         raise ParameterError(f'vehicle file {path}: not valid YAML ({error})') from error
     _check_keys(str(path), document or {}, ['vehicle', 'disturbances'])

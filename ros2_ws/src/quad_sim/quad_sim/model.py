@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.mixer import controls_from_forces, saturated
+from quad_msgs_bridge.rotor_layout import MIXER_SIZE
 from quad_msgs_bridge.state import STATE_SIZE
 from quad_msgs_bridge.vehicle_params import DISTURBANCE_CHANNELS, Disturbances, VehicleParams
 
@@ -34,22 +35,23 @@ from quad_msgs_bridge.vehicle_params import DISTURBANCE_CHANNELS, Disturbances, 
 CONSTANTS = ('m', 'g', 'Kfx', 'Kfy', 'Kfz', 'Kfphi', 'Kftheta', 'Kfpsi', 'Ix', 'Iy', 'Iz', 'd', 'c_x', 'c_y',
              'yaw_coefficient', 'F_min', 'F_max', 'wind_drag', 'thrust_gain_1', 'thrust_gain_2', 'thrust_gain_3',
              'thrust_gain_4', 'torque_gain_1', 'torque_gain_2', 'torque_gain_3', 'torque_gain_4',
-             'Iy_minus_Iz', 'Iz_minus_Ix', 'Ix_minus_Iy')
+             'Iy_minus_Iz', 'Iz_minus_Ix', 'Ix_minus_Iy') + tuple(f'mixer_{k}' for k in range(MIXER_SIZE))
 (_M, _G, _KFX, _KFY, _KFZ, _KFPHI, _KFTHETA, _KFPSI, _IX, _IY, _IZ, _D, _CX, _CY, _YAW, _FMIN, _FMAX, _WIND,
- _THRUST, _, _, _, _TORQUE, _, _, _, _GYRO_PHI, _GYRO_THETA, _GYRO_PSI) = range(len(CONSTANTS))
+ _THRUST, _, _, _, _TORQUE, _, _, _, _GYRO_PHI, _GYRO_THETA, _GYRO_PSI, _MIXER) = range(len(CONSTANTS) - MIXER_SIZE + 1)
 
 
 def vehicle_constants(params: VehicleParams) -> np.ndarray:
     """The kernels' constants of ``params``: shape (1, C) for one vehicle's values, (B, C) when any value
     is a per-vehicle array of B (columns CONSTANTS; each rotor's thrust gain f_i (1 - l_i) and torque
-    gain g_i (1 - l_i), and the inertia differences of eq. (1)'s gyroscopic torques [kg m^2])."""
+    gain g_i (1 - l_i), the inertia differences of eq. (1)'s gyroscopic torques [kg m^2], and the rotor
+    layout as the mixer reads it, ``params.mixer``: :mod:`quad_msgs_bridge.rotor_layout`)."""
     p = params
     efficiency = [1.0 - loss for loss in p.rotor_efficiency_loss]
     columns = [p.m, p.g, p.Kfx, p.Kfy, p.Kfz, p.Kfphi, p.Kftheta, p.Kfpsi, p.Ix, p.Iy, p.Iz, p.d,
                p.cog_offset[0], p.cog_offset[1], p.yaw_coefficient, p.F_min, p.F_max, p.wind_drag,
                *[f * e for f, e in zip(p.rotor_thrust_factors, efficiency)],
                *[g * e for g, e in zip(p.rotor_drag_factors, efficiency)],
-               p.Iy - p.Iz, p.Iz - p.Ix, p.Ix - p.Iy]
+               p.Iy - p.Iz, p.Iz - p.Ix, p.Ix - p.Iy, *np.moveaxis(p.mixer, -1, 0)]
     return np.ascontiguousarray(np.stack(np.broadcast_arrays(*[np.asarray(c, dtype=float) for c in columns]),
                                          axis=-1).reshape(-1, len(CONSTANTS)))
 
@@ -79,13 +81,14 @@ def _controls(c, forces):
 
     Each command is clipped to [F_min, F_max] (what the rotor speed controller can realise), then
     rotor i gives the thrust T_i = f_i (1 - l_i) F_i and the reaction torque g_i (1 - l_i) (Kd/Kp) F_i;
-    U1..U3 are eq. (2) of the thrusts, U4 eq. (2) of the torques (rotor order F1 front, F2 right,
-    F3 back, F4 left: :mod:`quad_msgs_bridge.mixer`)."""
+    U1..U3 are eq. (2) of the thrusts, U4 eq. (2) of the torques, in the vehicle's rotor layout (the
+    mixer's columns of ``c``: :func:`quad_msgs_bridge.mixer.controls_from_forces`)."""
     f1, f2, f3, f4 = saturated(forces, c[_FMIN], c[_FMAX])
+    mixer = c[_MIXER:_MIXER + MIXER_SIZE]
     u1, u2, u3, _ = controls_from_forces(f1 * c[_THRUST], f2 * c[_THRUST + 1], f3 * c[_THRUST + 2],
-                                         f4 * c[_THRUST + 3], c[_YAW])
+                                         f4 * c[_THRUST + 3], mixer)
     u4 = controls_from_forces(f1 * c[_TORQUE], f2 * c[_TORQUE + 1], f3 * c[_TORQUE + 2], f4 * c[_TORQUE + 3],
-                              c[_YAW])[3]
+                              mixer)[3]
     return u1, u2, u3, u4
 
 

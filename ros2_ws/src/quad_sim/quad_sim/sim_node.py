@@ -5,7 +5,8 @@ in the node's own namespace) and start from their slices of ``initial_state``. T
 one ``/clock`` for all, each vehicle's ``odom`` in that vehicle's namespace (child frame
 ``<namespace>/base_link``) and, with each odometry step, one ``/tf`` message holding every
 vehicle's ``odom -> <namespace>/base_link`` (its odometry pose, same stamp). Where ``tf2_msgs`` is
-not installed it says so once and runs without TF.
+not installed it says so once and runs without TF. At start it publishes each vehicle's URDF on its
+latched ``robot_description`` and, with TF, the rotor links on ``/tf_static`` (quad_msgs_bridge.urdf).
 
 Modes:
 * lockstep (default): publish ``/clock``, every ``odom`` and ``/tf`` for time t, wait until every
@@ -32,12 +33,14 @@ from functools import partial
 import rclpy
 from rclpy.node import Node
 
-from quad_msgs_bridge.contract import CLOCK, ODOM, ODOM_FRAME, ROTOR_FORCES, TF, base_frame, resolve, vehicle_namespaces
+from quad_msgs_bridge.contract import (CLOCK, ODOM, ODOM_FRAME, ROBOT_DESCRIPTION, ROTOR_FORCES, TF, TF_STATIC,
+                                      base_frame, resolve, vehicle_namespaces)
 from quad_msgs_bridge.conversions import MessageKit
 from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder, tf_encoder
 from quad_msgs_bridge.ros_helpers import (declare, publication_log, publisher, run_node, subscription,
                                           wait_for_acknowledgements)
 from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
+from quad_msgs_bridge.urdf import rotor_transforms_msg, vehicle_urdf
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .fleet import Fleet, LockstepAnswers, split_initial_states
@@ -108,6 +111,7 @@ class SimNode(Node):
         self.odom_pubs = [publisher(self, kit, ODOM, namespace, log=self.publication_log) for namespace in namespaces]
         self.odom_names = [resolve(ODOM, namespace) for namespace in namespaces]
         self.tf_pub = self.tf_publisher(kit) if publish_tf else None
+        self.publish_robot_description(kit, params, namespaces)
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs
         self.encode_clock = clock_encoder()
         self.encode_odometry = [odometry_encoder(ODOM_FRAME, frame) for frame in frames]
@@ -144,6 +148,17 @@ class SimNode(Node):
         except ImportError as error:
             self.get_logger().warning(f'{TF.type} is not installed ({error}): running without TF, nothing on {TF.name}')
             return None
+
+    def publish_robot_description(self, kit: MessageKit, params, namespaces) -> None:
+        """Each vehicle's URDF on its latched ``robot_description`` and, with TF, the rotor links' fixed
+        transforms on ``/tf_static`` (quad_msgs_bridge.urdf), once: RViz and Foxglove draw the vehicle at its TF."""
+        self.description_pubs = [publisher(self, kit, ROBOT_DESCRIPTION, namespace) for namespace in namespaces]
+        for pub, namespace in zip(self.description_pubs, namespaces):
+            pub.publish(kit[ROBOT_DESCRIPTION.type](data=vehicle_urdf(params, namespace)))
+        self.tf_static_pub = None
+        if self.tf_pub is not None:
+            self.tf_static_pub = publisher(self, kit, TF_STATIC)
+            self.tf_static_pub.publish(rotor_transforms_msg(kit, params, namespaces))
 
     # --- shared -----------------------------------------------------------------------------
     def publish_odometry(self, vehicles=None) -> None:

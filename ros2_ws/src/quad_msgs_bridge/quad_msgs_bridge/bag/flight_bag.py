@@ -21,6 +21,7 @@ from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFER
                                        GROUND_TRUTH, ODOM, ODOM_FRAME, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES,
                                        SETPOINTS, TF, TopicSpec, base_frame, resolve)
 from quad_msgs_bridge.conversions import path_msg, rosbags_kit, setpoints_msg
+from quad_msgs_bridge.mixer import ROTOR_NAMES
 from quad_msgs_bridge.fast_cdr import (clock_encoder, diagnostics_encoder, odometry_encoder, pose_stamped_encoder,
                                        rotor_forces_encoder, tf_encoder, wrench_encoder)
 from quad_msgs_bridge.reference import SetpointPath
@@ -48,6 +49,16 @@ def disturbances_label(enabled: bool) -> str:
 #: custom data keys of a flight that failed: why (flight_stack.closed_loop.FAILURES) and when [s, sim time];
 #: in a fleet's bag each vehicle's are suffixed with ':<namespace>' (see vehicle_custom_data)
 FAILURE_KEY, FAILURE_TIME_KEY = 'failure', 'failure_time_s'
+#: custom data keys of the run's plan: the flight's planned length [s] and its --max-error [m]; and why a
+#: flight stopped before that length without failing (``interrupted``: Ctrl-C), see quad_msgs_bridge.review.verdict
+DURATION_KEY, MAX_ERROR_KEY, STOPPED_KEY = 'duration_s', 'max_error_m', 'stopped'
+
+
+def mark_interrupted(writer: BagWriter, exc_type) -> None:
+    """Note in the bag's custom data (written when it closes) that a stop signal (KeyboardInterrupt) ended
+    the flight, so its review says so."""
+    if exc_type is not None and issubclass(exc_type, KeyboardInterrupt):
+        writer.custom_data[STOPPED_KEY] = 'interrupted'
 
 
 def recorded_failure(custom: dict) -> tuple[str, float] | None:
@@ -89,7 +100,7 @@ class FlightBag:
     """
 
     def __init__(self, writer: BagWriter, arm_length: float, namespace: str = DEFAULT_NAMESPACE,
-                 shared_topics: bool = True):
+                 shared_topics: bool = True, rotor_names: Sequence[str] = ROTOR_NAMES):
         self.writer = writer
         recorded = set(writer.topic_names())
 
@@ -107,7 +118,7 @@ class FlightBag:
         self._encode_clock = clock_encoder()
         self._encode_odometry = odometry_encoder(ODOM_FRAME, self._base_frame)
         self._encode_tf = tf_encoder([self._base_frame])
-        self._encode_forces = rotor_forces_encoder()
+        self._encode_forces = rotor_forces_encoder(rotor_names)     # the layout's labels (VehicleParams.rotor_names)
         self._encode_wrench = wrench_encoder(arm_length, self._base_frame)
         self._encode_pose = pose_stamped_encoder()
         self._encode_diagnostics = diagnostics_encoder()
@@ -119,7 +130,7 @@ class FlightBag:
         """A new bag at ``path`` for a flight of the vehicle ``params``; ``info`` labels the run."""
         custom_data = flight_custom_data(params, settle_time, namespace=namespace, **info)
         writer = BagWriter(path, topics, namespace, custom_data=custom_data, overwrite=overwrite)
-        return cls(writer, params.d, namespace)
+        return cls(writer, params.d, namespace, rotor_names=params.rotor_names)
 
     def record_setpoints(self, path: SetpointPath) -> None:
         """The trajectory node's ``setpoints`` and ``reference_path`` for ``path``, at its start stamp."""
@@ -172,6 +183,7 @@ class FlightBag:
         return self
 
     def __exit__(self, exc_type, exc, traceback) -> None:
+        mark_interrupted(self.writer, exc_type)
         self.writer.__exit__(exc_type, exc, traceback)
 
 
@@ -181,9 +193,11 @@ class FleetBag:
     publishes them. ``vehicles[k]`` records vehicle k's own topics; a context manager that closes the bag.
     """
 
-    def __init__(self, writer: BagWriter, arm_length: float, namespaces: Sequence[str]):
+    def __init__(self, writer: BagWriter, arm_length: float, namespaces: Sequence[str],
+                 rotor_names: Sequence[str] = ROTOR_NAMES):
         self.writer = writer
-        self.vehicles = [FlightBag(writer, arm_length, namespace, shared_topics=False) for namespace in namespaces]
+        self.vehicles = [FlightBag(writer, arm_length, namespace, shared_topics=False, rotor_names=rotor_names)
+                         for namespace in namespaces]
         recorded = set(writer.topic_names())
         self._clock = resolve(CLOCK, '') if resolve(CLOCK, '') in recorded else None
         self._tf = resolve(TF, '') if resolve(TF, '') in recorded else None
@@ -196,7 +210,7 @@ class FleetBag:
         """A new bag at ``path`` for a fleet of ``namespaces`` flying the vehicle ``params``."""
         custom_data = flight_custom_data(params, settle_time, vehicles=','.join(namespaces), **info)
         writer = BagWriter(path, topics, list(namespaces), custom_data=custom_data, overwrite=overwrite)
-        return cls(writer, params.d, namespaces)
+        return cls(writer, params.d, namespaces, rotor_names=params.rotor_names)
 
     def record_shared(self, odometries: Sequence[OdometrySample]) -> None:
         """``/clock`` and ``/tf`` of a step, from every vehicle's odometry (all of one stamp)."""
@@ -214,4 +228,5 @@ class FleetBag:
         return self
 
     def __exit__(self, exc_type, exc, traceback) -> None:
+        mark_interrupted(self.writer, exc_type)
         self.writer.__exit__(exc_type, exc, traceback)

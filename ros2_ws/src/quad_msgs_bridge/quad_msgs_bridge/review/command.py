@@ -19,10 +19,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Sequence
 
+from quad_msgs_bridge.output_path import output_path
 from quad_msgs_bridge.review.flight_from_bag import BagFlight, fleet_namespaces, read_flight
 from quad_msgs_bridge.review.plots import plot_flights
 from quad_msgs_bridge.review.report import text_table, write_html, write_markdown
+from quad_msgs_bridge.review.verdict import failures, max_error_of, planned_duration
 
+#: what a review writes into its output folder
+REVIEW_FILES = ('review.json', 'report.md', 'report.html', 'plots')
 PLOT_HINT = ('plots skipped: matplotlib is not installed (pip install matplotlib, '
              'or sudo apt install python3-matplotlib)')
 
@@ -62,18 +66,24 @@ def review_bags(bags: Sequence[str | Path], out_dir: str | Path, *, namespace: s
 
 
 def with_failure(metrics: dict, flight: BagFlight) -> dict:
-    """``metrics`` with the flight's ``failure`` (why it ended early, None if it did not, as far as its bag
-    records) and ``failure_time_s`` [s, sim time], as ``summary.json`` has them."""
-    failure = flight.failure
+    """``metrics`` with the flight's verdict as ``summary.json`` has it (quad_msgs_bridge.review.verdict):
+    ``failure`` (why a failure rule stopped it, None if none did, as far as its bag records) and
+    ``failure_time_s`` [s, sim time], ``ended_early`` (why and where it ended before its planned length,
+    None if it did not), ``planned_duration_s`` (None: not recorded), ``failures`` and ``flight_ok``."""
+    failure, custom = flight.failure, flight.custom_data
+    found = failures(metrics, flight.ending, max_error_of(custom))
     return {**metrics, 'failure': None if failure is None else failure[0],
-            'failure_time_s': None if failure is None else failure[1]}
+            'failure_time_s': None if failure is None else failure[1], 'ended_early': flight.ending,
+            'planned_duration_s': planned_duration(custom), 'failures': found, 'flight_ok': not found}
 
 
 def failure_note(label: str, metrics: dict) -> str:
-    """What the report says of a failed flight: why and when, and what its metrics cover."""
-    covered = ('NaN: it failed before the settling window ended' if math.isnan(metrics['rmse_position_m'])
-               else f'they cover the {metrics["duration_s"]:.3f} s it flew')
-    return f'{label} FAILED: {metrics["failure"]} at {metrics["failure_time_s"]:.3f} s; its metrics: {covered}'
+    """What the report says of a failed flight: why, and for one that ended early what its metrics cover."""
+    covered = ('' if metrics['ended_early'] is None
+               else '; its metrics: NaN: it failed before the settling window ended'
+               if math.isnan(metrics['rmse_position_m'])
+               else f'; its metrics: they cover the {metrics["duration_s"]:.3f} s it flew')
+    return f'{label} FAILED: {"; ".join(metrics["failures"])}{covered}'
 
 
 def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: bool = True) -> Review:
@@ -87,7 +97,7 @@ def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: 
         flight.label = label
     metrics = [with_failure(flight.metrics(), flight) for flight in flights]
     notes = [f'{f.label}: {warning}' for f in flights for warning in f.warnings]
-    notes += [failure_note(f.label, m) for f, m in zip(flights, metrics) if m['failure'] is not None]
+    notes += [failure_note(f.label, m) for f, m in zip(flights, metrics) if m['failures']]
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / 'review.json').write_text(json.dumps(
         [{'label': f.label, 'bag': str(f.path), **m} for f, m in zip(flights, metrics)], indent=2) + '\n')
@@ -102,13 +112,33 @@ def review_flights(flights: Sequence[BagFlight], out_dir: str | Path, *, plots: 
     return Review(list(flights), metrics, out_dir, report, plot_paths, notes)
 
 
+def clear_earlier_review(out_dir: Path, overwrite: bool) -> None:
+    """Make room for a review in ``out_dir``: ValueError if it holds an earlier review or run and not
+    ``overwrite``; with it, the earlier review's plots go (so none of them is taken for the new review's)."""
+    earlier = [name for name in (*REVIEW_FILES, 'summary.json') if (out_dir / name).exists()]
+    if not earlier:
+        return
+    if not overwrite:
+        raise ValueError(f'--out: {out_dir} holds an earlier review or run ({", ".join(earlier)}); pass --overwrite '
+                         'to replace its review, or choose another --out')
+    plots = out_dir / 'plots'
+    if plots.is_dir():
+        for plot in plots.glob('*.png'):
+            plot.unlink()
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog='review', description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('bag', type=Path, help='bag directory (rosbag2, MCAP or sqlite3) or .mcap file')
     parser.add_argument('--compare', type=Path, nargs='+', default=[], metavar='BAG',
                         help='more bags to overlay and tabulate next to the first')
-    parser.add_argument('--out', type=Path, default=None, help='output folder (default: BAG-review next to BAG)')
+    parser.add_argument('--out', type=output_path, default=None,
+                        help='output folder (default: BAG-review next to BAG); one that holds an earlier review or '
+                             'run is refused without --overwrite')
+    parser.add_argument('--overwrite', action='store_true',
+                        help='replace the earlier review in --out (its review.json, report.md, report.html and '
+                             'plots/; a run\'s summary.json and bag stay)')
     parser.add_argument('--vehicle', type=Path, default=None,
                         help='vehicle YAML for bags without vehicle parameters (default: the packaged one)')
     parser.add_argument('--settle-time', type=float, default=None,
@@ -119,6 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     out_dir = args.out or args.bag.parent / f'{args.bag.name}-review'
     try:
+        clear_earlier_review(out_dir, args.overwrite)
         result = review_bags([args.bag, *args.compare], out_dir, namespace=args.namespace,
                              vehicle_file=args.vehicle, settle_time=args.settle_time, plots=not args.no_plots)
     except (ValueError, OSError) as error:   # ValueError (BagReadError, ParameterError, too short): wrong input

@@ -25,9 +25,10 @@ from typing import Sequence
 import numpy as np
 
 from quad_msgs_bridge.bag.flight_bag import recorded_failure
-from quad_msgs_bridge.mixer import CONTROL_NAMES
+from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 from quad_msgs_bridge.review.metrics import (SHARE_WINDOW, SUBSYSTEMS, FlightRecord, StatisticsAccumulator,
                                              flight_metrics, has_fuzzy_term, metrics_from_statistics)
+from quad_msgs_bridge.review.verdict import ending
 from quad_msgs_bridge.state import PSI, STATE_NAMES, STATE_SIZE
 from quad_msgs_bridge.vehicle_params import VehicleParams
 
@@ -39,7 +40,7 @@ SERIES = {
     'state': (STATE_SIZE, None),               # STATE_NAMES; units in STATE_UNITS
     'reference_position': (3, 'm'),            # world ENU
     'reference_yaw': (1, 'rad'),
-    'forces': (4, 'N'),                        # rotor thrusts F1 front, F2 right, F3 back, F4 left
+    'forces': (4, 'N'),                        # rotor thrusts F1..F4 in the vehicle's layout (params.rotor_names)
     'controls': (4, None),                     # U1 [N], U2 [N], U3 [N], U4 [N m] of eq. (2)
     'surfaces': (6, None),                     # S = de + lambda e per subsystem (SURFACE_UNITS)
     'equivalent': (6, None),                   # NN equivalent-control term per subsystem
@@ -48,6 +49,9 @@ SERIES = {
 STATE_UNITS = ('m', 'm', 'm', 'm/s', 'm/s', 'm/s', 'rad', 'rad', 'rad', 'rad/s', 'rad/s', 'rad/s')
 #: the sliding surfaces' units: of a velocity error (x, y, z) or an angular rate error (phi, theta, psi)
 SURFACE_UNITS = ('m/s', 'm/s', 'm/s', 'rad/s', 'rad/s', 'rad/s')
+#: the units of each subsystem's virtual control, and so of its NN (equivalent) and fuzzy (corrective) terms:
+#: commanded accelerations (x, y), U1 (z), U2, U3 (phi, theta) and U4 (psi)
+VIRTUAL_CONTROL_UNITS = ('m/s^2', 'm/s^2', 'N', 'N', 'N', 'N m')
 _WIDTH = sum(columns for columns, _ in SERIES.values())
 _SLICES, _start = {}, 0
 for _name, (_columns, _) in SERIES.items():
@@ -65,7 +69,8 @@ class Flight:
       [rad] (Z-Y-X Euler angles), ``dphi dtheta dpsi`` [rad/s] (Euler-angle rates), as the odometry
       gives them (the true state; ``ground_truth/odom`` when the odometry carries sensor noise);
     * ``reference_position`` (N, 3) [m, world ENU], ``reference_yaw`` (N,) [rad];
-    * ``forces`` (N, 4) rotor thrusts F1 front, F2 right, F3 back, F4 left [N];
+    * ``forces`` (N, 4) rotor thrusts F1..F4 [N] in the order of the vehicle's layout (``params.rotor_names``;
+      the paper's plus frame: F1 front, F2 right, F3 back, F4 left);
     * ``controls`` (N, 4) U1 [N], U2 [N], U3 [N], U4 [N m] (paper eq. (2));
     * ``surfaces``, ``equivalent``, ``corrective`` (N, 6) per subsystem x, y, z, phi, theta, psi: the
       sliding surface S [m/s or rad/s], the NN equivalent-control term and the fuzzy corrective term
@@ -89,7 +94,9 @@ class Flight:
     path: Path | None = None          #: its bag, if it has one
     custom_data: dict = field(default_factory=dict)   #: the bag's custom data (controller, scenario, ...)
     warnings: list = field(default_factory=list)      #: what reading the bag found odd
-    ended_early: bool = False         #: the flight failed and ended there (see BagFlight.ended_early)
+    #: the flight ended before its planned length: it failed, was interrupted or its bag was cut short
+    #: (:attr:`ending` says why and where; see BagFlight.ended_early for what it does to the metrics)
+    ended_early: bool = False
     summary: dict | None = None       #: the run's summary (``summary.json``), for a flight just flown
     _sums: 'StepSums | None' = field(default=None, repr=False, compare=False)
 
@@ -97,6 +104,21 @@ class Flight:
     def failure(self) -> tuple[str, float] | None:
         """(why, when [s, sim time]) the flight failed, from its bag's custom data; None if none is recorded."""
         return recorded_failure(self.custom_data)
+
+    @property
+    def end_time(self) -> float:
+        """[s, sim time] of the last control step flown (also when rows were thinned out)."""
+        if self._sums is not None and self._sums.first_time is not None:
+            return float(self._sums.last_time)
+        return float(self.time[-1])
+
+    @property
+    def ending(self) -> str | None:
+        """Why and where the flight ended before its planned length ('interrupted at 31.000 s of 60 s',
+        'flipped over at 1.472 s'); None if it flew all of it, as far as its custom data says
+        (:func:`~quad_msgs_bridge.review.verdict.ending`)."""
+        period = (self.end_time - float(self.time[0])) / max(self.steps - 1, 1)
+        return ending(self.custom_data, self.end_time, period)
 
     @property
     def record(self) -> FlightRecord:
@@ -126,15 +148,26 @@ class Flight:
             named.update(zip((f'{prefix}_{axis}' for axis in SUBSYSTEMS), values.T))
         return named
 
+    def column_units(self) -> dict[str, str]:
+        """The unit of each of :meth:`columns` ('s', 'm', 'm/s', 'rad', 'rad/s', 'N', 'N m', 'm/s^2')."""
+        units = {'time': 's', **dict(zip(STATE_NAMES, STATE_UNITS)), 'x_ref': 'm', 'y_ref': 'm', 'z_ref': 'm',
+                 'yaw_ref': 'rad', **{f'F{k}': 'N' for k in range(1, 5)}, **dict(zip(CONTROL_NAMES, CONTROL_UNITS))}
+        units.update((f'S_{axis}', unit) for axis, unit in zip(SUBSYSTEMS, SURFACE_UNITS))
+        for prefix in ('nn', 'fuzzy'):
+            units.update((f'{prefix}_{axis}', unit) for axis, unit in zip(SUBSYSTEMS, VIRTUAL_CONTROL_UNITS))
+        return units
+
     def to_pandas(self):
-        """A pandas DataFrame of :meth:`columns`, one row per kept step. Needs pandas (not a dependency of
-        the stack: ``pip install pandas``)."""
+        """A pandas DataFrame of :meth:`columns` but ``time``, one row per kept step, indexed by sim time
+        (index ``time_s`` [s]). Needs pandas (not a dependency of the stack: ``pip install pandas``)."""
         try:
             import pandas
         except ImportError as error:
             raise ImportError('Flight.to_pandas needs pandas, which the flight stack does not install: '
                               'pip install pandas (or use Flight.columns(), numpy arrays)') from error
-        return pandas.DataFrame(self.columns())
+        columns = self.columns()
+        index = pandas.Index(columns.pop('time'), name='time_s')
+        return pandas.DataFrame(columns, index=index)
 
 
 class StepSums:

@@ -18,18 +18,21 @@ from pathlib import Path
 
 from rosbags.highlevel import AnyReader, AnyReaderError
 
-from quad_msgs_bridge.bag.flight_bag import FAILURE_KEY, recorded_failure, vehicle_custom_data
+from quad_msgs_bridge.bag.flight_bag import recorded_failure, vehicle_custom_data
 from quad_msgs_bridge.bag.reader import BagReadError, check_bag_path, is_finalized, mcap_file, read_custom_data
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (ALL_TOPICS, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GROUND_TRUTH,
                                        ODOM, ROTOR_FORCES, TopicSpec, resolve)
 from quad_msgs_bridge.conversions import (controls_from_wrench, diagnostics_from_msg, odometry_from_msg, pose_from_msg,
                           rotor_forces_from_msg)
-from quad_msgs_bridge.review.flight_data import Flight, FlightLog
+from quad_msgs_bridge.review.flight_data import MAX_ROWS, Flight, FlightLog
 from quad_msgs_bridge.review.metrics import FlightRecord, default_settle_time, flight_metrics, has_fuzzy_term
+from quad_msgs_bridge.review.verdict import ending
 from quad_msgs_bridge.state import state_from_odometry
 from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
+#: FlightLog rows that no flight reaches: every control step kept
+EVERY_STEP = 1 << 62
 #: the topics a flight record needs
 NEEDED_TOPICS = (ODOM, ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS)
 #: read when present: the true state of a flight whose odometry carries sensor noise
@@ -49,10 +52,17 @@ class BagFlight:
     settle_time: float            #: [s]
     custom_data: dict             #: the bag's custom data (controller, scenario, disturbances, ...)
     warnings: list = field(default_factory=list)
-    #: the flight failed and ended there (known for a flight just flown, and from a bag that records its
-    #: failure): if that was before two settled steps its tracking figures are NaN, as in its summary,
-    #: rather than a too-short flight refused
+    #: the flight ended before its planned length (it failed, known for a flight just flown and from a bag
+    #: that records its failure; or it was interrupted, or its bag cut short): if that was before two settled
+    #: steps its tracking figures are NaN, as in its summary, rather than a too-short flight refused
     ended_early: bool = False
+
+    @property
+    def ending(self) -> str | None:
+        """Why and where the flight ended before its planned length; None if it did not (see
+        :attr:`quad_msgs_bridge.review.flight_data.Flight.ending`)."""
+        time = self.record.time
+        return ending(self.custom_data, float(time[-1]), float(time[-1] - time[0]) / max(len(time) - 1, 1))
 
     @property
     def failure(self) -> tuple[str, float] | None:
@@ -143,7 +153,7 @@ class _StepPairing:
 
 
 def _read_steps(bag: Path, namespace: str | None, params: VehicleParams, settle_time: float | None,
-                warnings: list) -> FlightLog:
+                warnings: list, max_rows: int = MAX_ROWS) -> FlightLog:
     """The bag's control steps in a FlightLog (bounded memory); the settle time [s] None: the default one for
     the bag's span."""
     with AnyReader([bag], default_typestore=jazzy_typestore()) as reader:
@@ -155,7 +165,7 @@ def _read_steps(bag: Path, namespace: str | None, params: VehicleParams, settle_
         found.update({spec: _find_connection(reader.connections, spec, namespace) for spec in OPTIONAL_TOPICS})
         if settle_time is None:
             settle_time = default_settle_time((reader.end_time - reader.start_time) / 1e9)
-        log = FlightLog(float(settle_time), params.F_min, params.F_max)
+        log = FlightLog(float(settle_time), params.F_min, params.F_max, max_rows)
         steps = _StepPairing(log, use_truth=any(c.msgcount for c in found[GROUND_TRUTH]))
         role = {c.id: spec for spec, connections in found.items() for c in connections}
         for connection, _, raw in reader.messages(connections=[c for cs in found.values() for c in cs]):
@@ -190,13 +200,14 @@ def fleet_namespaces(bag: str | Path) -> list[str]:
 
 
 def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: str | Path | None = None,
-                settle_time: float | None = None) -> Flight:
+                settle_time: float | None = None, every_step: bool = False) -> Flight:
     """The flight recorded in ``bag`` (a :class:`~quad_msgs_bridge.review.flight_data.Flight`, the object
     ``flight_stack.api.fly`` returns); raises BagReadError if it lacks what a flight needs.
 
     ``namespace``, ``vehicle_file`` and ``settle_time`` [s] override what the bag says; without a
     settle time in either, :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the bag's
-    span. The bag is read message by message: memory stays bounded however long the flight.
+    span. The bag is read message by message: memory stays bounded however long the flight, unless
+    ``every_step`` keeps a row for every control step (no thinning, see flight_data: about 0.5 kB per step).
     """
     bag = Path(bag)
     check_bag_path(bag)
@@ -212,10 +223,12 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     if settle_time is None and custom.get('settle_time_s'):
         settle_time = float(custom['settle_time_s'])
     try:
-        log = _read_steps(bag, namespace, params, settle_time, warnings)
+        log = _read_steps(bag, namespace, params, settle_time, warnings, EVERY_STEP if every_step else MAX_ROWS)
     except AnyReaderError as error:
         raise BagReadError(f'{bag}: not readable as a bag: {error}') from error
     if not log.steps:
         raise BagReadError(f'{bag}: no complete control step')
-    return log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
-                      warnings=warnings, ended_early=FAILURE_KEY in custom)
+    flight = log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
+                        warnings=warnings)
+    flight.ended_early = flight.ending is not None
+    return flight

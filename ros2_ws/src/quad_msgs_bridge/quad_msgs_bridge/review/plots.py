@@ -27,7 +27,7 @@ from quad_msgs_bridge.conversions import SUBSYSTEM_NAMES
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.review.flight_from_bag import BagFlight
 from quad_msgs_bridge.review.metrics import SHARE_WINDOW, fuzzy_share, has_fuzzy_term
-from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS, ROTOR_NAMES
+from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
 
 FINE_SHARE_WINDOW = 0.5   #: [s] short windows of the fuzzy-share plot (the metrics use SHARE_WINDOW)
 ZOOM_SPAN = 1.0           #: [s] span of the control zoom
@@ -139,7 +139,7 @@ def plot_controls(plt, flights: Sequence[BagFlight], path: Path, span: tuple[flo
     for k in range(4):
         axes[k][0].set_ylabel(f'{CONTROL_NAMES[k]} [{CONTROL_UNITS[k]}]')
         if not span:
-            axes[k][1].set_ylabel(f'{ROTOR_NAMES[k]} [N]')
+            axes[k][1].set_ylabel(f'{flights[0].params.rotor_names[k]} [N]')   # F1..F4 of the vehicle's layout
             axes[k][1].axhline(flights[0].params.F_max, color='grey', linewidth=0.5, linestyle=':')
             axes[k][1].axhline(flights[0].params.F_min, color='grey', linewidth=0.5, linestyle=':')
     title = ('Control signals (Fig. 9)' if not span

@@ -21,8 +21,11 @@ FLIGHT_FACTS = (('controller', 'controller'), ('scenario', 'scenario'),
 CAMPAIGN_FACTS = (('campaign_seed', 'campaign seed'), ('flight', 'campaign flight'))
 #: (metric, what it means), in the order of the table
 METRIC_MEANINGS = (
-    ('result', 'whether the flight flew its whole duration, or why and when it failed (ended early); the '
-               'metrics of a failed flight cover the time it flew, and are NaN if it failed before settling'),
+    ('result', 'OK when the flight flew its whole planned duration within its checks; else FAILED and why: it '
+               'ended early (a failure rule stopped it, it was interrupted, or its bag was cut short: where), a '
+               'state or force went non-finite, or its max position error exceeds the run\'s --max-error. The '
+               'metrics of a flight that ended early cover the time it flew, and are NaN if it ended before '
+               'settling'),
     ('settle time', 'the first seconds of the flight (take-off and convergence), left out of every metric below '
                     'unless said otherwise'),
     ('position RMSE', 'root mean square of the distance between the vehicle and the reference position'),
@@ -69,10 +72,13 @@ def _share(metrics: dict, axis: str) -> str:
 
 
 def describe_result(metrics: dict) -> str:
-    """'flew its whole duration', or 'FAILED: flipped over at 1.472 s' (metrics with the flight's failure)."""
-    if metrics.get('failure') is None:
-        return 'flew its whole duration'
-    return f'FAILED: {metrics["failure"]} at {metrics["failure_time_s"]:.3f} s'
+    """'OK: flew its whole duration (60 s)', or 'FAILED: the flight ended early: flipped over at 1.472 s'
+    (metrics with the flight's verdict, see quad_msgs_bridge.review.command.with_failure)."""
+    if metrics['failures']:
+        return 'FAILED: ' + '; '.join(metrics['failures'])
+    if metrics.get('planned_duration_s') is None:
+        return 'no failure recorded (the bag does not record the planned duration)'
+    return f'OK: flew its whole duration ({metrics["planned_duration_s"]:g} s)'
 
 
 def _moment(metrics: dict) -> str:
@@ -130,15 +136,14 @@ def text_table(labels: Sequence[str], metrics: Sequence[dict]) -> str:
                      for name, values in rows)
 
 
-def flight_facts(flight) -> list[tuple[str, str]]:
-    """(what, value) describing a reviewed flight (a :class:`~quad_msgs_bridge.review.flight_from_bag.BagFlight`):
-    what was flown (the bag's custom data), whether and when it failed, and its bag."""
+def flight_facts(flight, metrics: dict) -> list[tuple[str, str]]:
+    """(what, value) describing a reviewed flight (a :class:`~quad_msgs_bridge.review.flight_from_bag.BagFlight`)
+    with its ``metrics`` and verdict: what was flown (the bag's custom data), whether and why it failed, and
+    its bag."""
     custom = flight.custom_data
-    failure = flight.failure
     return ([(name, str(custom.get(key) or NOT_RECORDED)) for key, name in FLIGHT_FACTS]
             + [(name, str(custom[key])) for key, name in CAMPAIGN_FACTS if key in custom]
-            + [('result', 'no failure recorded' if failure is None
-                else f'FAILED: {failure[0]} at {failure[1]:.3f} s')]
+            + [('result', describe_result(metrics))]
             + [('bag', str(flight.path))])
 
 
@@ -150,8 +155,8 @@ def write_markdown(path: Path, flights: Sequence, metrics: Sequence[dict], plots
                    notes: Sequence[str]) -> Path:
     labels = [flight.label for flight in flights]
     lines = ['# Flight review', '']
-    for flight in flights:
-        lines += [f'- **{flight.label}**: ' + '; '.join(f'{name}: {value}' for name, value in flight_facts(flight))]
+    for flight, m in zip(flights, metrics):
+        lines += [f'- **{flight.label}**: ' + '; '.join(f'{name}: {value}' for name, value in flight_facts(flight, m))]
     lines += ['', '## Metrics', '', '| metric | ' + ' | '.join(labels) + ' |',
               '|---|' + '---:|' * len(labels)]
     lines += [f'| {name} | ' + ' | '.join(values) + ' |' for name, values in metric_rows(metrics)]
@@ -178,8 +183,8 @@ def write_html(path: Path, flights: Sequence, metrics: Sequence[dict], plots: Se
     body = ''.join(f'<tr><td>{esc(name)}</td>' + ''.join(f'<td>{esc(v)}</td>' for v in values) + '</tr>'
                    for name, values in metric_rows(metrics))
     described = ''.join(f'<li><b>{esc(flight.label)}</b>: '
-                        + '; '.join(f'{esc(name)}: {esc(value)}' for name, value in flight_facts(flight)) + '</li>'
-                        for flight in flights)
+                        + '; '.join(f'{esc(name)}: {esc(value)}' for name, value in flight_facts(flight, m))
+                        + '</li>' for flight, m in zip(flights, metrics))
     meanings = ''.join(f'<li><b>{esc(name)}</b>: {esc(meaning)}</li>' for name, meaning in METRIC_MEANINGS)
     parts = ['<!DOCTYPE html><html><head><meta charset="utf-8"><title>Flight review</title><style>',
              'body{font-family:sans-serif;max-width:1200px;margin:auto}table{border-collapse:collapse}',
