@@ -71,6 +71,7 @@ def test_sat_ablation_is_minus_k_sat_of_s_over_phi(axis):
     assert [fuzzy(float(s)) for s in SURFACES[::50]] == list(expected[::50])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('axis', ['x', 'phi'])
 def test_type1_ablation_is_the_it2_system_with_equal_upper_and_lower_mfs(axis):
     gains = load_gains()['nnit2fsmc']['axes'][axis]
