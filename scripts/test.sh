@@ -4,18 +4,33 @@
 #   have on Ubuntu 24.04; where a ROS 2 Jazzy is sourced, its ROS tests run there against it;
 # - the ROS-marked tests once more in .venv-ros-wheels, on the PyPI ROS 2 wheels (requirements-ros-wheels.txt),
 #   which any machine can build: so the ROS half is tested without /opt/ros too. SKIP_ROS_WHEELS=1 leaves it out.
+# The three environments are set up at the same time; each run spreads its tests over one pytest-xdist worker per
+# CPU (TEST_WORKERS=N sets another count; the tests sharing a module-scoped flight stay on one worker: conftest.py).
+# --quick (first argument): the lane to run before every commit: .venv only, without the tests marked slow or ros.
 # Each run says which ROS 2 it used. Extra arguments go to pytest; pytest's "no tests collected" (exit code 5,
 # e.g. a file without ROS tests in the wheels run) is not a failure.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup_venv.sh .venv requirements-test.txt
-bash scripts/setup_venv.sh .venv-numpy126 requirements-test.txt
-.venv-numpy126/bin/python -m pip install --quiet --disable-pip-version-check numpy==1.26.4
+quick=0
+if [ "${1:-}" = --quick ]; then quick=1; shift; fi
 skip_wheels=${SKIP_ROS_WHEELS:-0}
+if [ $quick = 1 ]; then skip_wheels=1; fi
+workers=${TEST_WORKERS:-$(nproc 2>/dev/null || echo 2)}
+parallel=(-n "$workers" --dist loadgroup)
+
+setups=()
+bash scripts/setup_venv.sh .venv requirements-test.txt & setups+=($!)
+if [ $quick = 0 ]; then
+  { bash scripts/setup_venv.sh .venv-numpy126 requirements-test.txt &&
+    { [ "$(.venv-numpy126/bin/python -c 'import numpy; print(numpy.__version__)')" = 1.26.4 ] ||
+      .venv-numpy126/bin/python -m pip install --quiet --disable-pip-version-check numpy==1.26.4; }; } & setups+=($!)
+fi
 if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels: installing the pinned PyPI ROS 2 wheels (requirements-ros-wheels.txt)"
-  bash scripts/without_sourced_ros.sh bash scripts/setup_venv.sh .venv-ros-wheels requirements-ros-wheels.txt --isolated
+  bash scripts/without_sourced_ros.sh bash scripts/setup_venv.sh .venv-ros-wheels requirements-ros-wheels.txt \
+    --isolated & setups+=($!)
 fi
+for setup in "${setups[@]}"; do wait "$setup"; done
 
 status=0
 run_pytest() {
@@ -28,12 +43,34 @@ run_pytest() {
   fi
 }
 
+# The marker expression of the extra arguments (-m EXPR), the others apart: each run adds its own to it.
+user_marks=''; others=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    -m) user_marks="($2)"; shift 2 ;;
+    -m*) user_marks="(${1#-m})"; shift ;;
+    *) others+=("$1"); shift ;;
+  esac
+done
+
+run_suite() {   # run_suite MARKS PYTHON...: the tests of MARKS spread over the workers, then the exclusive ones alone
+  local selected=$1; shift
+  if [ -n "$user_marks" ]; then selected="${selected:+$selected and }$user_marks"; fi
+  run_pytest "$@" -m pytest "${parallel[@]}" "${others[@]}" -m "${selected:+$selected and }not exclusive"
+  run_pytest "$@" -m pytest "${others[@]}" -m "${selected:+$selected and }exclusive"
+}
+
+if [ $quick = 1 ]; then
+  echo "== .venv, quick lane (-m 'not slow and not ros'): numpy $(.venv/bin/python -c 'import numpy; print(numpy.__version__)')"
+  run_pytest .venv/bin/python -m pytest "${parallel[@]}" "${others[@]}" -m "${user_marks:+$user_marks and }not slow and not ros"
+  exit $status
+fi
 for venv in .venv .venv-numpy126; do
   echo "== $venv: numpy $("$venv/bin/python" -c 'import numpy; print(numpy.__version__)'); $("$venv/bin/python" tests/ros_support.py)"
-  run_pytest "$venv/bin/python" -m pytest "$@"
+  run_suite '' "$venv/bin/python"
 done
 if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels, ROS tests only (-m ros): $(bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python tests/ros_support.py)"
-  run_pytest bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python -m pytest "$@" -m ros
+  run_suite ros bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python
 fi
 exit $status

@@ -1,6 +1,9 @@
 """Fixtures shared by the test modules."""
 from __future__ import annotations
 
+import functools
+import re
+
 import pytest
 
 
@@ -14,3 +17,32 @@ def ros_node(request):
     yield node
     node.destroy_node()
     rclpy.shutdown()
+
+
+#: a fixture of a test module flown once for several of its tests (a module-, package- or session-scoped fixture)
+_SHARED_FIXTURE = re.compile(r"""@pytest\.fixture\([^)]*scope\s*=\s*['"](?:module|package|session)['"]""")
+
+
+@pytest.hookimpl(optionalhook=True)   # a hook of pytest-xdist: without it, unused
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadgroup`` (scripts/test.sh): every test goes to whichever pytest-xdist worker is free, but the tests
+    of a module with a shared fixture (a flight flown once per module) all go to one worker, which flies it once.
+    (pytest-xdist 3.8's own loadgroup reads groups from the node ids, which pytest 9.2 no longer lets it change:
+    pytest-dev/pytest-xdist#1386; this reads the module's source.)"""
+    if config.getvalue('dist') != 'loadgroup':
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    @functools.lru_cache(maxsize=None)
+    def shares_a_fixture(path: str) -> bool:
+        try:
+            return bool(_SHARED_FIXTURE.search((config.rootpath / path).read_text()))
+        except OSError:
+            return False
+
+    class ModuleFixtureScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            path = nodeid.split('::')[0]
+            return path if shares_a_fixture(path) else nodeid
+
+    return ModuleFixtureScheduling(config, log)

@@ -50,8 +50,13 @@ def ros_wheels_python() -> list[str] | None:
         return None
     return ['bash', str(ROOT / 'scripts' / 'without_sourced_ros.sh'), str(python)]
 
-# Our own DDS domain, so these tests neither see nor disturb other ROS 2 processes on the machine.
-os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
+# Our own DDS domain, so these tests neither see nor disturb other ROS 2 processes on the machine. The workers
+# of one pytest-xdist run (PYTEST_XDIST_WORKER gw0, gw1, ...: children of one process) take neighbouring domains.
+_worker = os.environ.get('PYTEST_XDIST_WORKER', '')
+if _worker.startswith('gw'):
+    os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getppid() % 25 * 4 + int(_worker[2:]) % 4))
+else:
+    os.environ.setdefault('ROS_DOMAIN_ID', str(100 + os.getpid() % 100))
 
 
 def node_process(name: str, module: str, namespace: str, params: dict, quiet: bool = True,

@@ -35,6 +35,7 @@ def single_flight(spec, controller, flight):
                         1.0 / setup.physics_dt, perturbations=perturbations, rules=setup.rules(spec)), setup
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('controller', CONTROLLERS)
 def test_a_batch_equals_the_same_flights_one_by_one(controller):
     rows = fly_batch(BatchJob(SPEC, controller, (0, 1, 2)))

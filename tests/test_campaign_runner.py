@@ -78,11 +78,13 @@ def test_wilson_interval_matches_the_formula_by_hand():
     assert wilson_interval(10, 10)[0] == pytest.approx(10 / (10 + 1.96 ** 2), abs=1e-3)
 
 
+@pytest.mark.slow
 def test_two_workers_and_other_batches_give_the_same_rows(reference_run, tmp_path):
     run_campaign(SPEC, tmp_path, RunOptions(workers=2, batch_size=3, progress=False))
     assert_same_rows(rows_by_key(reference_run), rows_by_key(tmp_path))
 
 
+@pytest.mark.slow
 def test_a_dask_cluster_gives_the_same_rows(reference_run, tmp_path):
     distributed = pytest.importorskip('distributed')
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host='127.0.0.1',
@@ -107,6 +109,7 @@ def run_cli(*args, **kwargs):
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL), **kwargs)
 
 
+@pytest.mark.slow
 def test_ctrl_c_keeps_every_finished_batch_and_resume_flies_the_rest(reference_run, tmp_path):
     spec_file = tmp_path / 'spec.yaml'
     spec_file.write_text(yaml.safe_dump(DOCUMENT))
@@ -133,6 +136,7 @@ def test_ctrl_c_keeps_every_finished_batch_and_resume_flies_the_rest(reference_r
     assert_same_rows(reference, rows_by_key(out))
 
 
+@pytest.mark.slow
 def test_replay_flies_one_flight_on_the_embedded_path_with_its_row_s_metrics(reference_run):
     from flight_stack.campaign.replay import replay_flight
     status = replay_flight(SPEC, reference_run, 3, RunOptions(progress=False))
@@ -168,6 +172,7 @@ def test_a_second_campaign_writing_the_same_folder_is_refused_and_adds_no_row(re
     assert not (fresh / LOCK_FILE).exists() and len(read_flights(fresh / 'flights.csv')) == 1
 
 
+@pytest.mark.slow
 def test_replay_reviews_a_flight_that_failed_before_settling(tmp_path):
     """A flight failed at the first settled check (its record ends before two settled steps) is replayed with
     its bag and review, tracking figures NaN as in its row, not refused as a flight too short to review."""
@@ -299,6 +304,7 @@ def test_a_script_calling_run_campaign_without_the_main_guard_is_refused_before_
     assert not (tmp_path / 'out').exists()
 
 
+@pytest.mark.slow
 def test_the_same_script_with_the_main_guard_flies(tmp_path):
     script = write_script(tmp_path, guarded=True)
     result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600)
@@ -326,6 +332,7 @@ def stderr_lines(process):
 PHASES = {'planning': 'campaign: ', 'compiling': 'compiling kernels', 'flying': 'campaign:   0%'}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('phase, signal_number', [('planning', signal.SIGINT), ('compiling', signal.SIGINT),
                                                   ('flying', signal.SIGINT), ('compiling', signal.SIGTERM),
                                                   ('flying', signal.SIGTERM)])

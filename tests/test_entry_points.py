@@ -45,6 +45,7 @@ def test_help_names_the_subcommands_and_the_caps():
     assert f'at most {MAX_VEHICLES}' in text
 
 
+@pytest.mark.slow
 def test_setup_venv_runs_pip_only_when_the_requirements_change(tmp_path):
     """The second call finds the stamp of the same requirements and leaves pip alone (here: any pip run
     after the first call fails, on a constraints file that does not exist, and the second call still

@@ -5,6 +5,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 from rosbags.highlevel import AnyReader
 
 from flight_stack.embedded import fly_embedded, fly_fleet
@@ -19,6 +20,7 @@ PARAMS, DISTURBANCES = load_vehicle_file()
 DURATION = 1.5
 
 
+@pytest.mark.slow
 def test_the_fleet_batch_equals_each_vehicle_flown_alone():
     vehicles = fleet_layout(3)
     trajectories = [make_scenario('paper', DURATION, offset=v.offset) for v in vehicles]
@@ -33,6 +35,7 @@ def test_the_fleet_batch_equals_each_vehicle_flown_alone():
     assert np.allclose(fleet[2].record.position[:, 1] - fleet[0].record.position[:, 1], 6.0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_run_stack_flies_records_and_reviews_an_embedded_fleet(tmp_path):
     out = tmp_path / 'fleet'
     done = subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'embedded', '--vehicles', '2',

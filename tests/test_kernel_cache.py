@@ -172,6 +172,7 @@ def call_the_law(tree: Path, env: dict) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_an_edit_of_the_fuzzy_term_reaches_the_cached_law_that_inlines_it(tmp_path):
     tree = tmp_path / 'tree'
     env = copy_of_the_packages(tree)
@@ -196,6 +197,7 @@ def test_an_edit_of_the_fuzzy_term_reaches_the_cached_law_that_inlines_it(tmp_pa
     assert cached_edit['law'] == edited['law'] and cached_edit['misses'] == 0 and cached_edit['hits'] >= 1
 
 
+@pytest.mark.slow
 def test_an_edit_reaches_the_law_cached_in_numba_cache_dir_too(tmp_path):
     """NUMBA_CACHE_DIR set: the kernels are cached in that folder (numba's own choice), stamped alike."""
     tree = tmp_path / 'tree'

@@ -107,6 +107,7 @@ def live_flight(tmp_path_factory):
             'bag': out / 'bag', 'plain_status': plain_status, 'plain_bag': plain / 'bag'}
 
 
+@pytest.mark.slow
 def test_the_client_sees_the_contract_topics_with_the_bags_schemas(live_flight):
     seen = live_flight['seen']
     assert live_flight['url'].startswith('ws://127.0.0.1:')
@@ -126,6 +127,7 @@ def test_the_client_sees_the_contract_topics_with_the_bags_schemas(live_flight):
         print(f'  {topic:28s} {channel["schemaName"]:45s} {channel["encoding"]}')
 
 
+@pytest.mark.slow
 def test_the_client_decodes_the_odometry_with_the_jazzy_typestore(live_flight):
     typestore = get_typestore(Stores.ROS2_JAZZY)
     stamps = []
@@ -149,6 +151,7 @@ def test_the_client_decodes_the_odometry_with_the_jazzy_typestore(live_flight):
           f'{len(path.poses)} poses')
 
 
+@pytest.mark.slow
 def test_a_client_that_leaves_mid_flight_does_not_stop_it(live_flight):
     assert live_flight['status'] == 0, live_flight['stderr']
     assert 'Traceback' not in live_flight['stderr']
@@ -161,6 +164,7 @@ def messages(bag: Path) -> list[tuple[str, int, int, bytes]]:
                 for _, channel, message in make_reader(stream).iter_messages(log_time_order=False)]
 
 
+@pytest.mark.slow
 def test_the_bag_of_a_live_flight_equals_the_bag_without_live(live_flight):
     assert live_flight['plain_status'] == 0
     live, plain = messages(live_flight['bag']), messages(live_flight['plain_bag'])
@@ -171,6 +175,7 @@ def test_the_bag_of_a_live_flight_equals_the_bag_without_live(live_flight):
     assert counts[0] == counts[1] and counts[0]['/quad/odom'] == STEPS
 
 
+@pytest.mark.slow
 def test_ctrl_c_closes_the_server_and_the_bag(tmp_path):
     process, url = start_live_flight(tmp_path, '--live-wait', '--speed-factor', '1')   # 3 s of wall time
     try:

@@ -176,6 +176,7 @@ def test_a_run_that_finished_while_the_second_waited_is_an_earlier_run_for_it(tm
     assert (out / 'summary.json').read_text() == 'first'
 
 
+@pytest.mark.slow
 def test_two_concurrent_flights_into_one_out_neither_is_lost(tmp_path):
     """Two real run_stack.py processes: the second starts while the first writes OUT (its staging folder
     exists) and is refused by name; the first's result is complete in OUT."""

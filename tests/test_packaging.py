@@ -76,6 +76,7 @@ def installed(tmp_path_factory):
     return python, wheel
 
 
+@pytest.mark.slow
 def test_the_wheel_holds_the_packages_and_their_configuration(installed):
     _, wheel = installed
     names = set(zipfile.ZipFile(wheel).namelist())
@@ -87,6 +88,7 @@ def test_the_wheel_holds_the_packages_and_their_configuration(installed):
     assert not [name for name in names if name.startswith(('tests/', 'bench/', 'test/'))]
 
 
+@pytest.mark.slow
 def test_every_module_imports_from_a_clean_environment(installed, tmp_path):
     python, _ = installed
     result = subprocess.run([str(python), '-c', IMPORT_ALL], cwd=tmp_path, capture_output=True, text=True,
@@ -97,6 +99,7 @@ def test_every_module_imports_from_a_clean_environment(installed, tmp_path):
     assert set(report['failed']) == ROS_ONLY and set(report['failed'].values()) <= ROS_MODULES
 
 
+@pytest.mark.slow
 def test_the_console_script_flies_from_the_installed_files(installed, tmp_path):
     python, _ = installed
     command = python.parent / 'nnit2fsmc-stack'

@@ -48,6 +48,7 @@ def flights(tmp_path_factory):
     return {kind: fly_recorded(base / kind, duration=2.0, controller=kind) for kind in ('nnit2fsmc', 'smc-sign')}
 
 
+@pytest.mark.slow
 def test_the_main_job_writes_bag_and_report_whose_metrics_equal_the_live_summary(tmp_path, capsys, monkeypatch):
     """The main job reviews the flight it just flew from its record in memory (it never reads its bag back);
     `review BAG` of the bag it wrote finds the same metrics and writes the same table."""
@@ -79,6 +80,7 @@ def test_the_main_job_writes_bag_and_report_whose_metrics_equal_the_live_summary
                      if line.startswith('| ')]
 
 
+@pytest.mark.slow
 def test_compare_overlays_and_tabulates_several_flights(flights, tmp_path):
     out = tmp_path / 'compare'
     result = subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), 'review', str(flights['nnit2fsmc'].bag),
@@ -217,6 +219,7 @@ def test_the_report_says_what_was_flown_and_what_each_metric_means(flights, tmp_
     assert 'What the metrics mean' in html and 'scenario: paper' in html
 
 
+@pytest.mark.slow
 def test_a_flight_without_fuzzy_term_has_no_fuzzy_share(flights, tmp_path):
     review = review_bags([flights['smc-sign'].bag], tmp_path, plots=True)
     assert review.metrics[0]['fuzzy_share'] is None

@@ -145,6 +145,7 @@ def campaign_rows() -> list[dict]:
     return rows
 
 
+@pytest.mark.slow
 def test_the_campaign_plots_explain_a_controller_without_finished_flight_and_title_parameters(tmp_path,
                                                                                               monkeypatch):
     figures = {}

@@ -654,6 +654,7 @@ def controller_stalls(bag, namespace) -> list[tuple[float, float]]:
             if (after.publish_time - before.publish_time) * 1e-9 > CONTROLLER_STALL]
 
 
+@pytest.mark.exclusive     # real time: another test flying beside it would starve its nodes
 def test_realtime_mode_never_runs_ahead_of_the_wall_clock_and_holds_hover(tmp_path):
     """At speed factor 1 sim time keeps to the wall clock, and the controller holds the hover to 5 cm after 2 s
     wherever it kept up: a real-time flight on a starved CPU does degrade (the simulator does not wait), so the

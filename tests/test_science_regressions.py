@@ -71,6 +71,7 @@ def test_sat_ablation_is_minus_k_sat_of_s_over_phi(axis):
     assert [fuzzy(float(s)) for s in SURFACES[::50]] == list(expected[::50])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('axis', ['x', 'phi'])
 def test_type1_ablation_is_the_it2_system_with_equal_upper_and_lower_mfs(axis):
     gains = load_gains()['nnit2fsmc']['axes'][axis]
@@ -236,6 +237,7 @@ def test_lemniscate_is_a_fast_figure_eight_and_a_scenario():
     assert lemniscate.initial_state[2] == 0.0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize('trajectory', [Helix(), Lemniscate()], ids=lambda t: type(t).__name__)
 def test_flatness_rates_are_the_time_derivatives_of_the_eq10_attitude(trajectory):
     """Along a noise-free reference (commanded acceleration = reference acceleration, yaw = reference
