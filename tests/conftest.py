@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import functools
 import re
+import sys
 
 import pytest
 
@@ -46,3 +47,9 @@ def pytest_xdist_make_scheduler(config, log):
             return path if shares_a_fixture(path) else nodeid
 
     return ModuleFixtureScheduling(config, log)
+
+
+@pytest.fixture
+def no_plots(monkeypatch):
+    """matplotlib cannot be imported: a review writes its report without plots (faster)."""
+    monkeypatch.setitem(sys.modules, 'matplotlib', None)

@@ -32,12 +32,6 @@ ROOT = Path(__file__).resolve().parent.parent
 FLY = ['--backend', 'embedded', '--quiet', '--scenario', 'hover']
 
 
-@pytest.fixture
-def no_plots(monkeypatch):
-    """matplotlib cannot be imported: reviews write their report without plots (faster)."""
-    monkeypatch.setitem(sys.modules, 'matplotlib', None)
-
-
 @pytest.fixture(scope='module')
 def run_6s(tmp_path_factory):
     """A complete 6 s hover run (bag, summary, report), to cut short, review and export."""

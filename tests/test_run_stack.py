@@ -35,12 +35,6 @@ def staging_folders(parent: Path) -> list[Path]:
     return sorted(p for p in parent.iterdir() if STAGING_MARK in p.name)
 
 
-@pytest.fixture
-def no_plots(monkeypatch):
-    """matplotlib cannot be imported: the review writes its report without plots (faster)."""
-    monkeypatch.setitem(sys.modules, 'matplotlib', None)
-
-
 @pytest.fixture(scope='module')
 def earlier_run_template(tmp_path_factory):
     """A real earlier run (2 s flight with bag and report, no plots), to be protected."""

@@ -67,19 +67,14 @@ from quad_msgs_bridge.frames import body_rates_from_euler_rates, rotation_from_e
 from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.vehicle_params import check_number
 
-from .l1_adaptive import per_vehicle_rows
+from .l1_adaptive import memory_slots, per_vehicle_rows
 from .se3 import SE3Controller
 
 #: the slots of one vehicle's INDI memory, in order, and their sizes
 MEMORY = (('omega_f', 3), ('alpha_f', 3), ('moment_f', 3), ('moment_model', 3), ('eta', 3), ('velocity_f', 3),
           ('acceleration_f', 3), ('thrust_f', 3), ('thrust_model', 3), ('moment_command', 3),
           ('thrust_command', 3), ('started', 1))
-SLOT = {}
-_offset = 0
-for _name, _size in MEMORY:
-    SLOT[_name] = _offset
-    _offset += _size
-MEMORY_SIZE = _offset
+SLOT, MEMORY_SIZE = memory_slots(MEMORY)
 (OMEGA_F, ALPHA_F, MOMENT_F, MOMENT_MODEL, ETA, VELOCITY_F, ACCELERATION_F, THRUST_F, THRUST_MODEL, MOMENT_COMMAND,
  THRUST_COMMAND, STARTED) = (SLOT[name] for name, _ in MEMORY)
 

@@ -61,15 +61,21 @@ from quad_msgs_bridge.vehicle_params import check_number
 
 from .se3 import SE3Controller
 
+
+def memory_slots(layout) -> tuple[dict[str, int], int]:
+    """({slot name: its first index}, the memory's length) of a kernel memory laid out as ``layout``:
+    (name, size) pairs in order, each slot following the one before it."""
+    slots, offset = {}, 0
+    for name, size in layout:
+        slots[name] = offset
+        offset += size
+    return slots, offset
+
+
 #: the slots of one vehicle's L1 memory, in order, and their sizes
 MEMORY = (('v_hat', 3), ('omega_hat', 3), ('sigma', 6), ('compensation', 4), ('velocity', 3), ('omega', 3),
           ('thrust_axis', 3), ('thrust_per_mass', 1), ('moment', 3), ('started', 1))
-SLOT = {}
-_offset = 0
-for _name, _size in MEMORY:
-    SLOT[_name] = _offset
-    _offset += _size
-MEMORY_SIZE = _offset
+SLOT, MEMORY_SIZE = memory_slots(MEMORY)
 V_HAT, OMEGA_HAT, SIGMA, COMPENSATION = SLOT['v_hat'], SLOT['omega_hat'], SLOT['sigma'], SLOT['compensation']
 VELOCITY, OMEGA, AXIS, THRUST, MOMENT, STARTED = (SLOT['velocity'], SLOT['omega'], SLOT['thrust_axis'],
                                                   SLOT['thrust_per_mass'], SLOT['moment'], SLOT['started'])
