@@ -84,8 +84,6 @@ class ControlOutput(NamedTuple):
     attitude_reference: tuple[float, float, float]  #: phi_d, theta_d, psi_d [rad]
 
 
-
-
 def check_inputs(t: float, state: Sequence, reference: ReferenceSample, batch: int | None):
     """The numeric namespace of ``state``, after checking the arguments of ``update``: ValueError naming
     the argument and what it should be (``t`` a finite time [s]; ``state`` 12 numbers for one vehicle,
