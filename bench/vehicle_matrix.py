@@ -1,0 +1,52 @@
+#!/usr/bin/env python3
+"""Every controller kind on every shipped vehicle, with the packaged gains (issue 28, docs/VEHICLES.md).
+
+Flies each kind on each shipped vehicle (its own file: layout, mass, inertia, its section IV disturbances
+scaled to them) on our plant, 20 s of ``hover`` and of the ``paper`` helix, and prints a Markdown table of
+the position RMSE after the settling time [cm] and any failure. The example campaign's rows of the same
+table come from the campaign command, one run per vehicle:
+
+    .venv/bin/python bench/vehicle_matrix.py
+    .venv/bin/python run_stack.py campaign campaigns/paper-robustness.yaml --flights 200 --seed 1 \\
+        --vehicle NAME --controllers nnit2fsmc,pid,se3,smc-integral,l1-se3,indi --out out/vehicles/NAME
+
+Deterministic: the same command gives the same table. ``--plant rotorpy`` flies RotorPy instead (about
+2,000 times slower per step: docs/ROTORPY.md).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from flight_stack.api import fly  # noqa: E402
+from quad_msgs_bridge.vehicle_params import shipped_vehicles  # noqa: E402
+
+KINDS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral', 'l1-se3', 'indi')
+SCENARIOS = ('hover', 'paper')
+
+
+def cell(kind: str, scenario: str, vehicle: str, duration: float, plant: str) -> str:
+    """'RMSE [cm]' of one flight, or 'failed: why'."""
+    summary = fly(kind, scenario, duration=duration, vehicle=vehicle, plant=plant).summary
+    if summary.get('failure'):
+        return f"failed: {summary['failure']}"
+    return f"{100.0 * summary['rmse_position_m']:.3f}"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--duration', type=float, default=20.0, help='[s] per flight')
+    parser.add_argument('--plant', default='quad_sim', help='quad_sim (our model), rotorpy or rotorpy-bare')
+    args = parser.parse_args()
+    print(f'| vehicle | scenario | {" | ".join(KINDS)} |')
+    print(f'|---|---|{"---:|" * len(KINDS)}')
+    for vehicle in shipped_vehicles():
+        for scenario in SCENARIOS:
+            cells = [cell(kind, scenario, vehicle, args.duration, args.plant) for kind in KINDS]
+            print(f'| {vehicle} | {scenario} | {" | ".join(cells)} |', flush=True)
+
+
+if __name__ == '__main__':
+    main()
