@@ -48,6 +48,27 @@ def test_every_search_space_holds_the_packaged_gains_and_sets_what_it_names(kind
     build_controller(kind, load_vehicle_file()[0], tuned)
 
 
+def test_no_two_kinds_tune_the_same_gain_so_every_tuned_point_fits_one_gains_file():
+    owners = {}
+    for kind, space in SEARCH_SPACES.items():
+        for dimension in space:
+            for gain in dimension.gains:
+                assert owners.setdefault(gain, kind) == kind, f'{gain}: tuned by {owners[gain]} and {kind}'
+
+
+def test_l1_se3_flies_its_own_se3_gains_not_those_of_se3():
+    params = load_vehicle_file()[0]
+    gains = load_gains()
+    assert gains['l1_se3']['axes'] == gains['se3']['axes']        # today's flights do not change
+    gains['se3']['axes']['x']['k_error'] = 30.0
+    gains['l1_se3']['axes']['x']['k_error'] = 20.0
+    assert build_controller('se3', params, gains).gains['x'][0] == 30.0
+    assert build_controller('l1-se3', params, gains).gains['x'][0] == 20.0
+    gains['l1_se3']['axes']['x']['k_rate'] = -1.0
+    with pytest.raises(ParameterError, match='l1_se3.axes.x.k_rate'):
+        build_controller('l1-se3', params, gains)
+
+
 def test_a_space_refuses_gains_it_cannot_express():
     gains = load_gains()
     gains['pid']['axes']['y']['kp'] = 13.0               # x and y share one dimension

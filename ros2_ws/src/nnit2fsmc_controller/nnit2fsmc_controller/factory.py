@@ -203,7 +203,8 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
                      allocation=gains.get('common', {}).get('allocation', 'priority'),
                      takeoff_height=_non_negative(gains, 'common.takeoff_height'), batch=batch)
     if kind in ('se3', 'l1-se3'):
-        se3_gains = {axis: tuple(_non_negative(gains, f'se3.axes.{axis}.{name}')
+        section = SE3Controller.GAINS_SECTION if kind == 'se3' else L1SE3Controller.GAINS_SECTION
+        se3_gains = {axis: tuple(_non_negative(gains, f'{section}.axes.{axis}.{name}')
                                  for name in ('k_error', 'k_rate', 'k_integral', 'integral_limit')) for axis in AXES}
         if kind == 'se3':
             return SE3Controller(kind, params, se3_gains, lam, dt, **structure)
@@ -375,13 +376,13 @@ GAIN_DESCRIPTIONS = {
     'boundary_layer': 'smc-sat boundary-layer width [units of S]',
     'switching_gain': 'SMC switching gain [units of the second derivative of the subsystem]',
     'kp': 'PID proportional gain', 'ki': 'PID integral gain', 'kd': 'PID derivative gain',
-    'integral_limit': 'integral clamp of pid, smc-integral, se3 [units of e * s]',
+    'integral_limit': 'integral clamp of pid, smc-integral, se3, l1-se3 [units of e * s]',
     'slope': 'smc-integral linear gain inside the boundary layer [units of q\'\' per unit of S]',
     'integral_gain': 'smc-integral surface S = de + lambda e + integral_gain int(e) [1/s^2]',
     'gain_uncertainty': 'smc-integral relative control-gain uncertainty: adds this times |u_eq| to the switching gain',
-    'k_error': 'se3, indi attitude or position error gain, divided by J or m [1/s^2]',
-    'k_rate': 'se3, indi angular or linear velocity error gain, divided by J or m [1/s]',
-    'k_integral': 'se3 integral gain, divided by J or m [1/s^3]',
+    'k_error': 'se3, l1-se3, indi attitude or position error gain, divided by J or m [1/s^2]',
+    'k_rate': 'se3, l1-se3, indi angular or linear velocity error gain, divided by J or m [1/s]',
+    'k_integral': 'se3, l1-se3 integral gain, divided by J or m [1/s^3]',
     'predictor_pole_translation': 'l1-se3: pole a_v of the velocity predictor, A_s = -a_v I [1/s]',
     'predictor_pole_rotation': 'l1-se3: pole a_w of the body-rate predictor, A_s = -a_w I [1/s]',
     'cutoff_translation_hz': 'l1-se3: cutoff of the low-pass C(s) of the thrust-axis compensation [Hz] (0: none)',

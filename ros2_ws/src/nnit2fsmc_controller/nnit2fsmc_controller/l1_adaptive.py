@@ -4,7 +4,8 @@ for agile quadrotors with performance guarantees", arXiv 2302.07208 (2023), sect
 piecewise-constant adaptation law of Hovakimyan & Cao, *L1 Adaptive Control Theory* (SIAM 2010),
 section 3.3.
 
-The baseline law u_b is the ``se3`` law (:class:`.se3.SE3Controller`, its gains ``se3.axes``). The
+The baseline law u_b is the ``se3`` law (:class:`.se3.SE3Controller`) with gains of its own,
+``l1_se3.axes`` (the keys of ``se3.axes``: se3 and l1-se3 are tuned apart, docs/TUNING.md). The
 uncertainty is lumped, as in L1Quad, into an unknown acceleration sigma_v [m/s^2, world] of the
 translational dynamics and an unknown angular acceleration sigma_w [rad/s^2, body] of the
 rotational ones (stated per unit of nominal mass and inertia, so the gains carry over between
@@ -159,6 +160,7 @@ class L1SE3Controller(SE3Controller):
     """
 
     STATE = SE3Controller.STATE + ('memory',)
+    GAINS_SECTION = 'l1_se3'   #: ``gains`` are ``l1_se3.axes``: its own se3 law
 
     def __init__(self, name, params, gains, lam, dt, l1: dict, **structure):
         super().__init__(name, params, gains, lam, dt, **structure)

@@ -107,6 +107,7 @@ class SE3Controller:
     """
 
     STATE = ('position_integral', 'attitude_integral')   #: with its rate filters' (nnit2fsmc_controller.tuning)
+    GAINS_SECTION = 'se3'   #: the gains file's section of ``gains`` (``se3.axes``)
 
     def __init__(self, name: str, params: VehicleParams, gains: dict, lam: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
@@ -115,7 +116,8 @@ class SE3Controller:
         self.name = name
         self.params = params
         self.batch = batch   #: None: one vehicle; B: update takes 12 arrays of B values
-        self.gains = {axis: tuple(check_number(f'se3.axes.{axis}', value, 0.0) for value in gains[axis])
+        self.gains = {axis: tuple(check_number(f'{self.GAINS_SECTION}.axes.{axis}', value, 0.0)
+                                  for value in gains[axis])
                       for axis in AXES}
         self.lam = {axis: check_number('lambda', lam[axis], 0.0, low_inclusive=False) for axis in AXES}
         self.dt = check_number('dt', dt, 0.0, low_inclusive=False)

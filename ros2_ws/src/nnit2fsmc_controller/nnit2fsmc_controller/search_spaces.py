@@ -73,11 +73,11 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
         _z('smc_integral', 'integral_gain', 0.2, 50.0, '1/s^2'),
         _z('smc_integral', 'switching_gain', 0.5, 20.0, 'm/s^2'),
     ),
-    'l1-se3': (    # the se3 law it augments, and its L1 translational loop (the campaigns' wind and mass)
-        _xy('se3', 'k_error', 2.0, 80.0, '1/s^2'),
-        _xy('se3', 'k_integral', 1.0, 200.0, '1/s^3'),
-        _xy('se3', 'k_rate', 1.0, 20.0, '1/s'),
-        _z('se3', 'k_error', 10.0, 200.0, '1/s^2'),
+    'l1-se3': (    # its own se3 law (l1_se3.axes, apart from se3's), and its L1 translational loop
+        _xy('l1_se3', 'k_error', 2.0, 80.0, '1/s^2'),
+        _xy('l1_se3', 'k_integral', 1.0, 200.0, '1/s^3'),
+        _xy('l1_se3', 'k_rate', 1.0, 20.0, '1/s'),
+        _z('l1_se3', 'k_error', 10.0, 200.0, '1/s^2'),
         Dimension('l1.predictor_pole_translation', ('l1_se3.predictor_pole_translation',), 0.5, 50.0, '1/s'),
         Dimension('l1.cutoff_translation_hz', ('l1_se3.cutoff_translation_hz',), 0.5, 50.0, 'Hz'),
     ),
