@@ -67,6 +67,7 @@ CONTROLLERS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral')
 MOTOR_LAG = 0.030        #: [s] the example campaign's motor time constant
 PHYSICS_RATE = 4000.0    #: [Hz] 0.25 ms delay resolution at 1 kHz control
 GAIN_STEPS = 6
+MAX_DELAY = 0.064        #: [s] the delay bisection's range is 0..MAX_DELAY (--max-delay)
 MAX_GAIN = 16.0
 POSITION_AXES = ('x', 'y', 'z')
 
@@ -184,14 +185,11 @@ def gain_margin(flight, undelayed) -> tuple[float, dict]:
     return math.exp(high), tried
 
 
-def simulated(task) -> dict:
-    """Every simulated figure of one (controller, duration, max_delay, filters, gain only)."""
-    kind, duration, max_delay, filters, gain_only = task
+def delay_margins(kind: str, duration: float, max_delay: float, filters: bool = True, with_gain: bool = False) -> dict:
+    """The simulated delay margins of ``kind`` with ideal rotors and with the 30 ms motor lag
+    (``delay_lag0``, ``delay_lag0.03``: seconds, text, the undelayed flight's RMSE [cm] and failure), and
+    with ``with_gain`` the gain margin (``gain``) on the undelayed flight without lag."""
     out = {}
-    if gain_only:
-        flight = paper_tables.Flight(kind, 'paper', duration, physics_rate=PHYSICS_RATE, filters=filters)
-        factor, tried = gain_margin(flight, paper_tables.fly(flight))
-        return {'gain': {'factor': factor, 'why': tried.get(factor)}}
     for lag in (0.0, MOTOR_LAG):
         flight = paper_tables.Flight(kind, 'paper', duration, physics_rate=PHYSICS_RATE, motor_lag=lag,
                                      filters=filters)
@@ -199,17 +197,28 @@ def simulated(task) -> dict:
         margin = paper_tables.delay_margin(flight, base, max_delay)
         out[f'delay_lag{lag:g}'] = {'seconds': margin.seconds, 'text': margin.text, 'rmse_cm': base.rmse_cm,
                                     'base_failure': base.failure}
-        if lag == 0.0:
+        if lag == 0.0 and with_gain:
             factor, tried = gain_margin(flight, base)
             out['gain'] = {'factor': factor, 'why': tried.get(factor)}
     return out
+
+
+def simulated(task) -> dict:
+    """Every simulated figure of one (controller, duration, max_delay, filters, gain only)."""
+    kind, duration, max_delay, filters, gain_only = task
+    if gain_only:
+        flight = paper_tables.Flight(kind, 'paper', duration, physics_rate=PHYSICS_RATE, filters=filters)
+        factor, tried = gain_margin(flight, paper_tables.fly(flight))
+        return {'gain': {'factor': factor, 'why': tried.get(factor)}}
+    return delay_margins(kind, duration, max_delay, filters, with_gain=True)
 
 
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--controllers', default=','.join(CONTROLLERS))
     parser.add_argument('--duration', type=float, default=30.0, help='[s] each simulated flight (default 30)')
-    parser.add_argument('--max-delay', type=float, default=0.064, help='[s] delay bisection range (default 0.064)')
+    parser.add_argument('--max-delay', type=float, default=MAX_DELAY,
+                        help=f'[s] delay bisection range (default {MAX_DELAY:g})')
     parser.add_argument('--no-filters', action='store_true', help='also every figure with the measurement stage off')
     parser.add_argument('--linear-only', action='store_true', help='only the linearised margins (no flight)')
     parser.add_argument('--gain-only', action='store_true', help='of the simulated margins, only the gain margin')

@@ -137,9 +137,10 @@ FAITHFUL = ':faithful'   #: controller suffix: the paper-faithful settings
 
 def gains_for(control_rate: float | None, faithful: bool = False, gains: dict | None = None,
               filters: bool = True) -> dict:
-    """The packaged gains, or ``gains`` (with factory.PAPER_FAITHFUL if ``faithful``; with the measurement
-    stage off if not ``filters``), at ``control_rate`` [Hz] if given."""
-    gains = copy.deepcopy(gains) if gains is not None else factory.load_gains()
+    """The packaged gains (the named set paper-faithful if ``faithful``), or ``gains`` (with
+    factory.PAPER_FAITHFUL if ``faithful``); with the measurement stage off if not ``filters``; at
+    ``control_rate`` [Hz] if given."""
+    gains = copy.deepcopy(gains) if gains is not None else factory.load_gains('paper-faithful' if faithful else None)
     if not filters:
         gains['common'] = {**gains['common'], 'measurement_filter_hz': 0.0, 'velocity_filter_hz': 0.0}
     if faithful:

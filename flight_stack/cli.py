@@ -77,7 +77,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                              'and an existing --bag')
     parser.add_argument('--vehicle', type=Path, default=None,
                         help='vehicle YAML, or a shipped vehicle by name: paper (the default), crazyflie, hummingbird, x500')
-    parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
+    parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML, or a named set: packaged (the default), untuned, paper-faithful')
     parser.add_argument('--plant', choices=PLANTS, default=DEFAULT_PLANT,
                         help='what the simulator flies: our model of eq. (1), or RotorPy (docs/ROTORPY.md)')
     parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz], a multiple of the control rate')

@@ -51,7 +51,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--vehicle', type=Path, default=None,
                         help='nominal vehicle YAML, or a shipped vehicle by name: paper (the default), crazyflie, '
                              'hummingbird, x500')
-    parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML (default: the packaged one)')
+    parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML, or a named set: packaged (the default), untuned, paper-faithful')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--fail-below', type=float, default=None, metavar='FRACTION',
                         help='exit with status 1, naming them, when any controller finishes fewer than FRACTION '

@@ -41,7 +41,8 @@ def _campaign_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--scheduler', default=None, metavar='ADDRESS',
                         help='fly the campaigns on this Dask distributed scheduler (e.g. tcp://127.0.0.1:8786)')
     parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle YAML (default: the packaged one)')
-    parser.add_argument('--gains', type=Path, default=None, help='gains YAML (default: the packaged one)')
+    parser.add_argument('--gains', type=Path, default=None, help='gains YAML, or a named set: packaged (the default), untuned, '
+                             'paper-faithful')
     parser.add_argument('--quiet', action='store_true', help='no progress lines')
 
 

@@ -8,11 +8,12 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['test']),
-    package_data={package_name: ['config/*.yaml']},
+    package_data={package_name: ['config/*.yaml', 'config/gains/*.yaml']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/config', glob(package_name + '/config/*.yaml')),
+        ('share/' + package_name + '/config/gains', glob(package_name + '/config/gains/*.yaml')),
     ],
     # the same as the root pyproject.toml's for this package (pip install .); package.xml names them by rosdep key
     install_requires=['setuptools', 'numpy>=1.26.4', 'PyYAML>=6.0', 'numba>=0.68.1'],

@@ -25,6 +25,9 @@ from .neural_network import MODIFICATIONS, EquivalentControlNetwork
 from .se3 import SE3Controller
 
 DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controller.yaml'
+#: the named gains sets (``--gains NAME``; docs/SCOREBOARD.md): 'untuned' (the packaged gains before issue 26's
+#: tuning) and 'paper-faithful' (those with PAPER_FAITHFUL); 'packaged' is DEFAULT_CONTROLLER_FILE
+SHIPPED_GAINS = Path(__file__).resolve().parent / 'config' / 'gains'
 #: the NNIT2FSMC's ablations (docs/ADAPTIVE.md): the IT2 term replaced by -K sat(S / Phi), type-1 fuzzy
 #: (lower membership functions = upper ones), learning off, and a network whose only input is the bias
 ABLATIONS = ('nnit2fsmc-sat', 'nnit2fsmc-type1', 'nnit2fsmc-nolearn', 'nnit2fsmc-bias')
@@ -66,13 +69,31 @@ PAPER_FAITHFUL: dict = {
 }
 
 
+def shipped_gains() -> dict[str, Path]:
+    """The named gains files: 'packaged' (the default) and those of SHIPPED_GAINS, by file stem."""
+    return {'packaged': DEFAULT_CONTROLLER_FILE, **{p.stem: p for p in sorted(SHIPPED_GAINS.glob('*.yaml'))}}
+
+
+def locate_gains(path: str | Path | None) -> Path:
+    """The gains file of ``path``: a file that exists, else the named gains set of that name (``untuned`` or
+    ``untuned.yaml``), else ``path`` as given; None: the packaged file."""
+    if path is None:
+        return DEFAULT_CONTROLLER_FILE
+    path = Path(path)
+    if path.exists() or path.parent != Path('.'):
+        return path
+    return shipped_gains().get(path.name[:-len('.yaml')] if path.suffix == '.yaml' else path.name, path)
+
+
 def load_gains(path: str | Path | None = None) -> dict:
-    """The gains file as a dict (default: the packaged one); errors name the file."""
-    path = Path(path) if path is not None else DEFAULT_CONTROLLER_FILE
+    """The gains file as a dict (default: the packaged one), or a named gains set (:func:`locate_gains`);
+    errors name the file."""
+    path = locate_gains(path)
     try:
         gains = yaml.safe_load(path.read_text())
     except OSError as error:
-        raise ParameterError(f'controller file {path}: {error.strerror}') from error
+        raise ParameterError(f'controller file {path}: {error.strerror} (named gains: '
+                             f'{", ".join(shipped_gains())})') from error
     except yaml.YAMLError as error:
         raise ParameterError(f'controller file {path}: not valid YAML ({error})') from error
     if not isinstance(gains, dict):

@@ -1,0 +1,584 @@
+#!/usr/bin/env python3
+"""Issue 26's scoreboard: every kind with its tuned gains, on the held-out seeds, under every disturbance,
+with its nominal, noise and delay-margin figures (docs/SCOREBOARD.md).
+
+    # 1. the tuned points (run_stack.py tune ... --out ROOT/tune-KIND) become the packaged gains
+    .venv/bin/python bench/scoreboard.py package /work/scoreboard --trials-to docs/tuning
+    # 2. what the run will cost on this machine, measured (a few flights per kind), and the plan
+    .venv/bin/python bench/scoreboard.py plan
+    # 3. fly it (resumable: the same command again continues), write the tables and docs/SCOREBOARD.md
+    .venv/bin/python bench/scoreboard.py run --out out/scoreboard --markdown docs/SCOREBOARD.md
+    # tables only, from what DIR holds
+    .venv/bin/python bench/scoreboard.py tables out/scoreboard --markdown docs/SCOREBOARD.md
+
+``run`` flies, with one gains file (default: the packaged one, which after ``package`` holds every kind's
+tuned gains; they do not collide, tests/test_tune_stress.py):
+
+* **held out**: ``SPEC`` (default campaigns/paper-robustness.yaml at ``--duration`` 30 s, the tuning's) on the
+  seeds 101-103, ``--flights`` 1,000 each, one campaign folder per seed and kind
+  (``DIR/heldout/seed-S/KIND``; checked to fly the same perturbed flights: bench/heldout_table.py); the tables
+  of bench/heldout_table.py: per kind and the paired comparison against the NNIT2FSMC;
+* **breaking points**: ``run_stack.py stress SPEC --kind D`` for every disturbance D of
+  flight_stack/campaign/stress.py and every kind, ``--stress-flights`` flights of ``--stress-duration`` s per try
+  (``DIR/stress``);
+* **nominal and noise rows**: bench/paper_tables.py's nominal and noise experiments on the paper helix
+  (``--nominal-duration`` s);
+* **delay margins**: bench/margins.py ``delay_margins`` (ideal rotors and 30 ms motor lag, to 0.25 ms).
+
+Writes ``DIR/heldout.csv``, ``DIR/paired.csv``, ``DIR/stress/breaking_points.csv`` (and its tries and plots),
+``DIR/margins.csv``, ``DIR/nominal_noise.md`` and ``DIR/SCOREBOARD.md``; ``--markdown FILE`` also puts the
+tables between the generated-section markers of FILE. ``DIR/scoreboard.json`` keeps the settings and the
+gains' digest: a run with other gains or settings in the same DIR is refused.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import hashlib
+import json
+import math
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
+import heldout_table  # noqa: E402
+from flight_stack.campaign.results import FLIGHTS_FILE  # noqa: E402
+from flight_stack.campaign.runner import RunOptions, holds_campaign, run_campaign  # noqa: E402
+from flight_stack.campaign.spec import load_spec  # noqa: E402
+from flight_stack.campaign.stress import BREAKING_POINTS_FILE, KINDS as DISTURBANCES  # noqa: E402
+from nnit2fsmc_controller.factory import (DEFAULT_CONTROLLER_FILE, flatten_gains, load_gains,  # noqa: E402
+                                          locate_gains)
+from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values  # noqa: E402
+from quad_msgs_bridge.vehicle_params import ParameterError  # noqa: E402
+
+KINDS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral', 'l1-se3', 'indi')
+SPEC = 'campaigns/paper-robustness.yaml'
+HELDOUT_SEEDS = (101, 102, 103)
+SETTINGS_FILE = 'scoreboard.json'
+#: the header lines ``package`` writes (and replaces when run again): where each kind's tuned point came from
+PROVENANCE = '# Tuned (issue 26; bench/scoreboard.py package, docs/SCOREBOARD.md): '
+MARKERS = ('<!-- scoreboard:begin (bench/scoreboard.py writes this section) -->', '<!-- scoreboard:end -->')
+#: flights of a delay margin: the undelayed flight, the range's end, then bisection of 0.064 s to 0.25 ms
+#: (8 halvings), for ideal rotors and the 30 ms lag
+MARGIN_FLIGHTS = 2 * (2 + 8)
+
+
+# --- 1. package: each kind's best tuned point onto the packaged gains file --------------------------------
+
+def best_point(trials_csv: Path, kind: str) -> tuple[dict, dict]:
+    """(point {dimension: value}, its row) of the best complete trial of a ``run_stack.py tune`` trials table
+    (the lowest objective; the earlier trial on a tie, as Optuna's best trial)."""
+    with trials_csv.open(newline='') as stream:
+        rows = [row for row in csv.DictReader(stream) if row['state'] == 'complete']
+    if not rows:
+        raise ParameterError(f'{trials_csv}: no complete trial')
+    best = min(rows, key=lambda row: (float(row['objective_m']), int(row['trial'])))
+    names = [d.name for d in search_space(kind)]
+    missing = [name for name in names if name not in best]
+    if missing:
+        raise ParameterError(f'{trials_csv}: no column {missing[0]} ({kind}\'s search space: {", ".join(names)})')
+    return {name: float(best[name]) for name in names}, best
+
+
+def set_in_text(text: str, values: dict[str, float]) -> str:
+    """The gains file ``text`` (config/controller.yaml's layout: block sections; leaves as ``key: value`` or in a
+    flow mapping ``{key: value, ...}`` that may run over several lines) with each dotted gain of ``values`` set,
+    comments and layout kept. ParameterError naming a gain the text does not hold."""
+    import re
+    lines = text.split('\n')
+    stack: list[tuple[int, str]] = []
+    left = dict(values)
+    flow: tuple[str, int] | None = None          # (the open flow mapping's dotted name, its brace depth)
+
+    def code_and_comment(line: str) -> tuple[str, str]:
+        cut = line.find('#')
+        return (line, '') if cut < 0 else (line[:cut], line[cut:])
+
+    def set_leaves(index: int, dotted: str) -> None:
+        code, comment = code_and_comment(lines[index])
+        for name in [n for n in left if n.rpartition('.')[0] == dotted]:
+            leaf = re.escape(name.rpartition('.')[2])
+            code, count = re.subn(rf'((?:^\s*|[{{,]\s*){leaf}:\s*)([^,}}\s]+)', rf'\g<1>{left[name]!r}', code)
+            if count == 1:
+                del left[name]
+        lines[index] = code + comment
+
+    for index, line in enumerate(lines):
+        code = code_and_comment(line)[0]
+        if flow is not None:                       # a line of a flow mapping opened above
+            set_leaves(index, flow[0])
+            depth = flow[1] + code.count('{') - code.count('}')
+            flow = (flow[0], depth) if depth > 0 else None
+            continue
+        match = re.match(r'^(\s*)([^\s:#][^:]*):\s*(.*?)\s*$', code)
+        if not match:
+            continue
+        indent, key, value = len(match.group(1)), match.group(2).strip(), match.group(3)
+        while stack and stack[-1][0] >= indent:
+            stack.pop()
+        dotted = '.'.join([k for _, k in stack if k not in ('/**', 'ros__parameters')] + [key])
+        if value == '':
+            stack.append((indent, key))
+        elif value.startswith('{'):
+            set_leaves(index, dotted)
+            depth = value.count('{') - value.count('}')
+            flow = (dotted, depth) if depth > 0 else None
+        elif dotted in left:
+            colon = line.index(':', indent) + 1
+            old, comment = code_and_comment(line[colon:])
+            padding = len(old) - len(old.lstrip())
+            new_value = repr(float(left.pop(dotted)))
+            gap = ' ' * max(1, len(old) - padding - len(new_value)) if comment else ''
+            lines[index] = line[:colon] + ' ' * padding + new_value + gap + comment
+    if left:
+        raise ParameterError(f'{next(iter(left))}: not in the gains file (its search dimension cannot be set)')
+    return '\n'.join(lines)
+
+
+def package(root: Path, kinds, into: Path, trials_to: Path | None) -> list[str]:
+    """Apply each kind's best point (``root/tune-KIND/trials-KIND.csv``) to the gains file ``into`` by its
+    dimension names; checks that the file then holds exactly those gains changed. The report's lines."""
+    base = load_gains(into)
+    text = into.read_text()
+    expected = base
+    report = []
+    for kind in kinds:
+        trials = root / f'tune-{kind}' / f'trials-{kind}.csv'
+        point, row = best_point(trials, kind)
+        expected = with_values(expected, kind, point)
+        text = set_in_text(text, {gain: point[d.name] for d in search_space(kind) for gain in d.gains})
+        report.append(f'{kind}: trial {row["trial"]}, objective {100 * float(row["objective_m"]):.3f} cm '
+                      f'({row["finished"]}/{row["flights"]} finished): '
+                      + ', '.join(f'{name} = {value:.4g}' for name, value in point.items()))
+        if trials_to is not None:
+            trials_to.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(trials, trials_to / trials.name)
+    kept = [line for line in text.split('\n') if not line.startswith(PROVENANCE)]
+    text = '\n'.join([PROVENANCE + line for line in report] + kept)
+    with tempfile.TemporaryDirectory() as folder:
+        check = Path(folder) / 'gains.yaml'
+        check.write_text(text)
+        if flatten_gains(load_gains(check)) != flatten_gains(expected):
+            raise ParameterError(f'{into}: writing the tuned points changed more than they hold (refused, unchanged)')
+    for kind in kinds:
+        values_in(expected, kind)
+    into.write_text(text)
+    return report
+
+
+# --- 2. run: the flights -------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Settings:
+    spec: str = SPEC
+    gains: str | None = None
+    kinds: tuple[str, ...] = KINDS
+    seeds: tuple[int, ...] = HELDOUT_SEEDS
+    flights: int = 1000
+    duration: float = 30.0
+    disturbances: tuple[str, ...] = tuple(DISTURBANCES)
+    stress_flights: int = 20
+    stress_duration: float = 15.0
+    nominal_duration: float = 60.0
+    margin_duration: float = 30.0
+    workers: int | None = None
+
+    def gains_file(self) -> str:
+        return str(locate_gains(self.gains))
+
+    def identity(self) -> dict:
+        """What must not change between two runs into one DIR (the workers may)."""
+        document = {k: v for k, v in self.__dict__.items() if k != 'workers'}
+        document['gains_digest'] = hashlib.sha256(
+            json.dumps(flatten_gains(load_gains(self.gains)), sort_keys=True).encode()).hexdigest()[:16]
+        return json.loads(json.dumps(document))
+
+
+def heldout_folder(out: Path, seed: int, kind: str) -> Path:
+    return out / 'heldout' / f'seed-{seed}' / kind
+
+
+def fly_heldout(settings: Settings, out: Path) -> list[Path]:
+    spec = load_spec(Path(settings.spec))
+    folders = []
+    for seed in settings.seeds:
+        for kind in settings.kinds:
+            folder = heldout_folder(out, seed, kind)
+            campaign = spec.overridden(flights=settings.flights, seed=seed, duration=settings.duration,
+                                       controllers=[kind])
+            print(f'scoreboard: held out, seed {seed}, {kind}: {settings.flights} flights of {settings.duration:g} s '
+                  f'-> {folder}', file=sys.stderr, flush=True)
+            run_campaign(campaign, folder, RunOptions(workers=settings.workers, gains_file=settings.gains_file(),
+                                                      resume=holds_campaign(folder), report=False))
+            folders.append(folder)
+    return folders
+
+
+def fly_stress(settings: Settings, out: Path) -> None:
+    from flight_stack.campaign.study_cli import stress_main
+    for disturbance in settings.disturbances:
+        argv = [settings.spec, '--kind', disturbance, '--controllers', ','.join(settings.kinds),
+                '--flights', str(settings.stress_flights), '--duration', f'{settings.stress_duration:g}',
+                '--out', str(out / 'stress'), '--gains', settings.gains_file()]
+        if settings.workers:
+            argv += ['--workers', str(settings.workers)]
+        print('scoreboard: run_stack.py stress ' + ' '.join(argv), file=sys.stderr, flush=True)
+        if stress_main(argv) != 0:
+            raise ParameterError(f'stress --kind {disturbance} failed (its message is above)')
+
+
+def jobs(settings: Settings) -> int:
+    import os
+    return settings.workers or os.cpu_count() or 1
+
+
+def fly_nominal_noise(settings: Settings, out: Path) -> Path:
+    import paper_tables
+    path = out / 'nominal_noise.md'
+    if path.exists():
+        return path
+    paper_tables.OVERRIDES.clear()
+    paper_tables.OVERRIDES['gains_file'] = settings.gains_file()
+    lines = paper_tables.paper_tables(('nominal', 'noise'), list(settings.kinds),
+                                      {'nominal': ('paper',), 'noise': ('paper',)}, settings.nominal_duration,
+                                      [1000.0], jobs(settings))
+    path.write_text('\n'.join(lines) + '\n')
+    return path
+
+
+def fly_margins(settings: Settings, out: Path) -> Path:
+    """``DIR/margins.json`` {kind: bench/margins.py delay_margins}, kind by kind (a kind done is kept)."""
+    import paper_tables
+    path = out / 'margins.json'
+    done = json.loads(path.read_text()) if path.exists() else {}
+    todo = [kind for kind in settings.kinds if kind not in done]
+    paper_tables.OVERRIDES.clear()
+    paper_tables.OVERRIDES['gains_file'] = settings.gains_file()
+    for kind, result in zip(todo, paper_tables.run_all(_margin_task, [(k, settings.margin_duration) for k in todo],
+                                                       jobs(settings))):
+        done[kind] = result
+        path.write_text(json.dumps(done, indent=1, default=str))
+    return path
+
+
+def _margin_task(task) -> dict:
+    import margins
+    kind, duration = task
+    return margins.delay_margins(kind, duration, margins.MAX_DELAY)
+
+
+# --- 3. tables ---------------------------------------------------------------------------------------------
+
+def breaking_lines(path: Path, kinds, disturbances) -> list[str]:
+    """Kind x disturbance: the breaking point (found: 'x (holds at y)'; none up to the range's end: '> x';
+    already below 90 % at the low end: '<= x'), from stress's breaking_points.csv."""
+    if not path.exists():
+        return ['(no breaking point flown yet)']
+    with path.open(newline='') as stream:
+        rows = {(row['kind'], row['controller']): row for row in csv.DictReader(stream)}
+    intensities = {d: DISTURBANCES[d].intensity for d in disturbances}
+    lines = ['| kind | ' + ' | '.join(f'{d}: {intensities[d]}' for d in disturbances) + ' |',
+             '|---|' + '---:|' * len(disturbances)]
+    for kind in kinds:
+        cells = []
+        for d in disturbances:
+            row = rows.get((d, kind))
+            if row is None:
+                cells.append('-')
+            elif row['status'] == 'found':
+                cells.append(f'{float(row["fails_at"]):g} (holds at {float(row["holds_at"]):g})')
+            elif row['status'] == 'above_range':
+                cells.append(f'> {float(row["holds_at"]):g}')
+            else:
+                cells.append(f'<= {float(row["fails_at"]):g}')
+        lines.append(f'| {kind} | ' + ' | '.join(cells) + ' |')
+    return lines
+
+
+def margin_records(path: Path, kinds) -> list[dict]:
+    import margins
+    if not path.exists():
+        return []
+    done = json.loads(path.read_text())
+    return [{'controller': kind, 'rmse_cm_no_lag': done[kind]['delay_lag0']['rmse_cm'],
+             'delay_margin_s_no_lag': done[kind]['delay_lag0']['seconds'],
+             'delay_margin_no_lag': done[kind]['delay_lag0']['text'],
+             'rmse_cm_30ms_lag': done[kind][f'delay_lag{margins.MOTOR_LAG:g}']['rmse_cm'],
+             'delay_margin_s_30ms_lag': done[kind][f'delay_lag{margins.MOTOR_LAG:g}']['seconds'],
+             'delay_margin_30ms_lag': done[kind][f'delay_lag{margins.MOTOR_LAG:g}']['text']}
+            for kind in kinds if kind in done]
+
+
+def margin_lines(records: list[dict]) -> list[str]:
+    lines = ['| kind | RMSE [cm], ideal rotors | delay margin, ideal rotors | RMSE [cm], 30 ms motor lag | '
+             'delay margin, 30 ms motor lag |', '|---|---:|---:|---:|---:|']
+    for r in records:
+        lines.append(f'| {r["controller"]} | {r["rmse_cm_no_lag"]:.3g} | {r["delay_margin_no_lag"]} | '
+                     f'{r["rmse_cm_30ms_lag"]:.3g} | {r["delay_margin_30ms_lag"]} |')
+    return lines
+
+
+def tables(out: Path, settings: Settings) -> str:
+    """Every table from what DIR holds; writes the CSVs and DIR/SCOREBOARD.md; returns the markdown."""
+    s = settings
+    folders = [heldout_folder(out, seed, kind) for seed in s.seeds for kind in s.kinds
+               if (heldout_folder(out, seed, kind) / FLIGHTS_FILE).exists()]
+    parts = [f'Settings: spec `{s.spec}`, gains `{s.gains or "packaged"}` (digest {s.identity()["gains_digest"]}); '
+             f'kinds {", ".join(s.kinds)}. Made by `bench/scoreboard.py` (docs/SCOREBOARD.md says how).', '']
+    if folders:
+        by_seed = heldout_table.read_all(folders)
+        kinds = heldout_table.kind_records(by_seed)
+        pairs = heldout_table.paired_records(by_seed, s.kinds[0])
+        heldout_table.write_csv(kinds, out / 'heldout.csv')
+        heldout_table.write_csv(pairs, out / 'paired.csv')
+        flown = sorted({r['flights'] for r in kinds if r['seed'] != heldout_table.ALL_SEEDS})
+        parts += [f'### Held out: seeds {", ".join(map(str, s.seeds))}, {"/".join(map(str, flown))} flights each of '
+                  f'{s.duration:g} s', '',
+                  'RMSE percentiles over all flights, a failed flight counted as worse than any (`failed` where a '
+                  'percentile falls on failures); 95 % intervals: Wilson for shares, order statistics for '
+                  'percentiles (flight_stack/campaign/paired.py).', '', *heldout_table.kind_lines(kinds), '',
+                  f'### Paired against {s.kinds[0]} (flight k of seed s: the same perturbed vehicle, wind, noise)',
+                  '',
+                  'A finished flight beats a failed one; two failed flights tie. The median paired difference has '
+                  'the sign test\'s order-statistic interval.', '', *heldout_table.paired_lines(pairs), '']
+    parts += [f'### Breaking points: the intensity where fewer than 90 % of {s.stress_flights} flights of '
+              f'{s.stress_duration:g} s finish under 10 cm (`run_stack.py stress`)', '',
+              *breaking_lines(out / 'stress' / BREAKING_POINTS_FILE, s.kinds, s.disturbances), '']
+    nominal = out / 'nominal_noise.md'
+    if nominal.exists():
+        parts += [f'### Nominal and noise (paper helix, {s.nominal_duration:g} s; bench/paper_tables.py)', '',
+                  nominal.read_text().strip(), '']
+    margins = margin_records(out / 'margins.json', s.kinds)
+    if margins:
+        heldout_table.write_csv(margins, out / 'margins.csv')
+        parts += [f'### Delay margins (paper helix, {s.margin_duration:g} s, to 0.25 ms; bench/margins.py)', '',
+                  *margin_lines(margins), '']
+    text = '\n'.join(parts)
+    (out / 'SCOREBOARD.md').write_text(text + '\n')
+    return text
+
+
+def write_section(path: Path, text: str) -> None:
+    """Replace the generated section of ``path`` (between MARKERS) with ``text``; ParameterError without markers."""
+    document = path.read_text()
+    begin, end = MARKERS
+    if begin not in document or end not in document:
+        raise ParameterError(f'--markdown: {path} has no generated section ({begin} ... {end})')
+    head, rest = document.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    path.write_text(f'{head}{begin}\n{text}\n{end}{tail}')
+
+
+# --- 4. plan: the cost, measured --------------------------------------------------------------------------
+
+def stress_tries(disturbance: str) -> int:
+    """The tries a bisection makes at most: the range's two ends, then halvings down to the resolution."""
+    kind = DISTURBANCES[disturbance]
+    return 2 + max(0, math.ceil(math.log2((kind.high - kind.low) / kind.resolution)))
+
+
+def tuning_cost(root: Path, kind: str, duration: float) -> float | None:
+    """Wall seconds per flight of ``duration`` s from the tuning's trials table (``root/tune-KIND``): the median
+    over its complete trials of wall time / flights, scaled from its flight length; None without a table."""
+    import statistics
+    import yaml
+    trials = root / f'tune-{kind}' / f'trials-{kind}.csv'
+    campaigns = sorted((root / f'tune-{kind}' / 'campaigns').glob('*/seed-*/spec.yaml'))
+    if not trials.exists() or not campaigns:
+        return None
+    flown = float(yaml.safe_load(campaigns[0].read_text())['duration'])
+    with trials.open(newline='') as stream:
+        costs = [float(row['wall_time_s']) / float(row['flights']) for row in csv.DictReader(stream)
+                 if row['state'] == 'complete' and row['flights'] not in ('', '0')]
+    return statistics.median(costs) * duration / flown if costs else None
+
+
+def measure(settings: Settings, flights: int = 8) -> dict[str, float]:
+    """{kind: wall seconds per flight of ``settings.duration`` s} on this machine now: the slope between a
+    campaign of 2 flights and one of ``flights`` (so the workers' start-up and kernel loading, paid by both,
+    drop out), after a flight that compiles or loads the kernels."""
+    spec = load_spec(Path(settings.spec))
+    cost = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for kind in settings.kinds:
+            options = RunOptions(workers=settings.workers, gains_file=settings.gains_file(), progress=False,
+                                 report=False)
+            run_campaign(spec.overridden(flights=1, seed=0, duration=min(settings.duration, 6.0), controllers=[kind]),
+                         Path(folder) / f'warm-{kind}', options)
+            walls = []
+            for count in (2, flights):
+                start = time.perf_counter()
+                run_campaign(spec.overridden(flights=count, seed=0, duration=settings.duration, controllers=[kind]),
+                             Path(folder) / f'{kind}-{count}', options)
+                walls.append(time.perf_counter() - start)
+            cost[kind] = max(walls[1] - walls[0], 0.0) / (flights - 2)
+            print(f'scoreboard plan: {kind}: {cost[kind]:.3f} s wall per {settings.duration:g} s flight (measured)',
+                  file=sys.stderr, flush=True)
+    return cost
+
+
+def costs(settings: Settings, tune_root: Path | None, flights: int) -> dict[str, float]:
+    """Each kind's wall seconds per flight: from its tuning's trials table when ``tune_root`` holds one,
+    else measured (:func:`measure`)."""
+    known = {kind: tuning_cost(tune_root, kind, settings.duration) for kind in settings.kinds} if tune_root else {}
+    known = {kind: cost for kind, cost in known.items() if cost is not None}
+    for kind, cost in known.items():
+        print(f'scoreboard plan: {kind}: {cost:.3f} s wall per {settings.duration:g} s flight (its tuning\'s trials)',
+              file=sys.stderr)
+    missing = tuple(kind for kind in settings.kinds if kind not in known)
+    if missing:
+        known.update(measure(replace(settings, kinds=missing), flights))
+    return {kind: known[kind] for kind in settings.kinds}
+
+
+def plan(settings: Settings, cost: dict[str, float]) -> list[str]:
+    """The run's parts with their flights and estimated wall time (a campaign flight's cost scales with its
+    length; a delay-margin flight runs its physics at 4 kHz, counted as 2 campaign flights of its length)."""
+    s = settings
+    per_second = {kind: c / s.duration for kind, c in cost.items()}
+    heldout = sum(len(s.seeds) * s.flights * s.duration * per_second[k] for k in s.kinds)
+    tries = sum(stress_tries(d) for d in s.disturbances)
+    stress = sum(tries * s.stress_flights * s.stress_duration * per_second[k] for k in s.kinds)
+    nominal = sum(2 * s.nominal_duration * per_second[k] for k in s.kinds)
+    margin = sum(MARGIN_FLIGHTS * 2 * s.margin_duration * per_second[k] for k in s.kinds)
+    rows = [('held out', f'{len(s.kinds)} kinds x {len(s.seeds)} seeds x {s.flights} flights of {s.duration:g} s',
+             heldout),
+            ('breaking points', f'{len(s.kinds)} kinds x {tries} tries at most ({len(s.disturbances)} disturbances) x '
+                                f'{s.stress_flights} flights of {s.stress_duration:g} s', stress),
+            ('nominal, noise', f'{len(s.kinds)} kinds x 2 flights of {s.nominal_duration:g} s', nominal),
+            ('delay margins', f'{len(s.kinds)} kinds x about {MARGIN_FLIGHTS} flights of {s.margin_duration:g} s '
+                              'at 4 kHz', margin)]
+    lines = ['| part | flights | estimated wall time [min] |', '|---|---|---:|']
+    lines += [f'| {name} | {what} | {seconds / 60:.0f} |' for name, what, seconds in rows]
+    lines.append(f'| total | | {sum(r[2] for r in rows) / 60:.0f} |')
+    lines += ['', 'measured wall seconds per flight of {:g} s: '.format(s.duration)
+              + ', '.join(f'{k} {c:.3f}' for k, c in cost.items())]
+    return lines
+
+
+# --- the command --------------------------------------------------------------------------------------------
+
+def names(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(',') if part.strip())
+
+
+def settings_of(args) -> Settings:
+    unknown = [d for d in names(args.disturbances) if d not in DISTURBANCES]
+    if unknown:
+        raise ParameterError(f'--disturbances: unknown {", ".join(unknown)} (of {", ".join(DISTURBANCES)})')
+    kinds = names(args.kinds)
+    if not kinds:
+        raise ParameterError('--kinds: give at least one controller kind (the first is the paired reference)')
+    for name, value in (('--flights', args.flights), ('--stress-flights', args.stress_flights)):
+        if value < 1:
+            raise ParameterError(f'{name}: {value} must be a whole number >= 1')
+    settings = Settings(args.spec, args.gains, kinds, tuple(int(s) for s in names(args.seeds)), args.flights,
+                        args.duration, names(args.disturbances), args.stress_flights, args.stress_duration,
+                        args.nominal_duration, args.margin_duration, args.workers)
+    load_gains(settings.gains)          # a named set or a file: refused here, before anything flies
+    return settings
+
+
+def _run_options(parser: argparse.ArgumentParser) -> None:
+    d = Settings()
+    parser.add_argument('--spec', default=d.spec, help=f'campaign spec (default {d.spec})')
+    parser.add_argument('--gains', default=None, help='gains file or named set for every kind (default: packaged)')
+    parser.add_argument('--kinds', default=','.join(d.kinds), help='controller kinds; the first is the paired '
+                                                                  f'reference (default {",".join(d.kinds)})')
+    parser.add_argument('--seeds', default=','.join(map(str, d.seeds)), help='held-out campaign seeds')
+    parser.add_argument('--flights', type=int, default=d.flights, help='held-out flights per seed and kind')
+    parser.add_argument('--duration', type=float, default=d.duration, help='[s] held-out flight (the tuning\'s)')
+    parser.add_argument('--disturbances', default=','.join(d.disturbances), help='stress kinds')
+    parser.add_argument('--stress-flights', type=int, default=d.stress_flights, help='flights per stress try')
+    parser.add_argument('--stress-duration', type=float, default=d.stress_duration, help='[s] stress flight')
+    parser.add_argument('--nominal-duration', type=float, default=d.nominal_duration,
+                        help='[s] nominal and noise flights')
+    parser.add_argument('--margin-duration', type=float, default=d.margin_duration, help='[s] delay-margin flights')
+    parser.add_argument('--workers', type=int, default=None, help='local worker processes (default: every core)')
+
+
+PARTS = ('heldout', 'stress', 'nominal', 'margins')
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    commands = parser.add_subparsers(dest='command', required=True)
+    p = commands.add_parser('package', help='each kind\'s best tuned point onto the packaged gains file')
+    p.add_argument('root', type=Path, help='folder holding tune-KIND/trials-KIND.csv for each kind')
+    p.add_argument('--kinds', default=','.join(KINDS))
+    p.add_argument('--into', type=Path, default=DEFAULT_CONTROLLER_FILE,
+                   help='the gains file to write the points into (default: the packaged one)')
+    p.add_argument('--trials-to', type=Path, default=None, help='also copy every trials-KIND.csv into this folder')
+    p = commands.add_parser('plan', help='measure the cost per flight now and print the run\'s plan')
+    _run_options(p)
+    p.add_argument('--tune-root', type=Path, default=None,
+                   help='folder of the tuning (tune-KIND/): its trials tables give the cost per flight')
+    p.add_argument('--measure-flights', type=int, default=8,
+                   help='flights per kind to time where no trials table says (default 8, >= 3)')
+    p = commands.add_parser('run', help='fly everything missing in DIR and write the tables')
+    p.add_argument('--out', type=Path, required=True)
+    _run_options(p)
+    p.add_argument('--skip', default='', help=f'parts left out this time: {",".join(PARTS)}')
+    p.add_argument('--markdown', type=Path, default=None, help='also write the tables into this file\'s section')
+    p = commands.add_parser('tables', help='the tables from what DIR holds')
+    p.add_argument('out', type=Path)
+    p.add_argument('--markdown', type=Path, default=None)
+    args = parser.parse_args(argv)
+    try:
+        if args.command == 'package':
+            for line in package(args.root, names(args.kinds), args.into, args.trials_to):
+                print(line)
+            print(f'wrote {args.into}')
+            return 0
+        if args.command == 'tables':
+            stored = json.loads((args.out / SETTINGS_FILE).read_text())
+            settings = Settings(**{k: tuple(v) if isinstance(v, list) else v for k, v in stored.items()
+                                   if k in Settings.__dataclass_fields__})
+            text = tables(args.out, settings)
+            if args.markdown:
+                write_section(args.markdown, text)
+            print(text)
+            return 0
+        settings = settings_of(args)
+        if args.command == 'plan':
+            if args.measure_flights < 3:
+                raise ParameterError(f'--measure-flights: {args.measure_flights} must be >= 3')
+            print('\n'.join(plan(settings, costs(settings, args.tune_root, args.measure_flights))))
+            return 0
+        skip = set(names(args.skip))
+        if skip - set(PARTS):
+            raise ParameterError(f'--skip: unknown {", ".join(sorted(skip - set(PARTS)))} (parts: {", ".join(PARTS)})')
+        args.out.mkdir(parents=True, exist_ok=True)
+        identity = settings.identity()
+        stored_path = args.out / SETTINGS_FILE
+        if stored_path.exists() and json.loads(stored_path.read_text()) != identity:
+            raise ParameterError(f'--out: {args.out} holds a scoreboard of other settings or gains '
+                                 f'({stored_path}); use another --out')
+        stored_path.write_text(json.dumps(identity, indent=1))
+        if 'heldout' not in skip:
+            fly_heldout(settings, args.out)
+        if 'stress' not in skip:
+            fly_stress(settings, args.out)
+        if 'nominal' not in skip:
+            fly_nominal_noise(settings, args.out)
+        if 'margins' not in skip:
+            fly_margins(settings, args.out)
+        text = tables(args.out, settings)
+        if args.markdown:
+            write_section(args.markdown, text)
+        print(text)
+    except (ParameterError, ValueError) as error:
+        print(f'error: {error}', file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

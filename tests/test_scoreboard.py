@@ -1,0 +1,228 @@
+"""Issue 26's scoreboard (docs/SCOREBOARD.md): its statistics on synthetic data, the pairing of separate
+campaigns, the named gains sets, and the packaging of tuned points into one gains file."""
+import csv
+import math
+import random
+import sys
+from pathlib import Path
+
+import distributed
+import pytest
+import yaml
+
+from flight_stack.campaign.paired import binomial_cdfs, paired, quantile, quantile_ranks, sign_test
+from flight_stack.campaign.results import wilson_interval
+from flight_stack.campaign.runner import RunOptions, run_campaign
+from flight_stack.campaign.spec import parse_spec
+from nnit2fsmc_controller.factory import (DEFAULT_CONTROLLER_FILE, PAPER_FAITHFUL, flatten_gains, gain_names,
+                                          load_gains, locate_gains, shipped_gains, unflatten_gains)
+from nnit2fsmc_controller.search_spaces import SEARCH_SPACES, search_space, values_in, with_values
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / 'bench'))
+import heldout_table  # noqa: E402
+import scoreboard  # noqa: E402
+
+sys.path.remove(str(ROOT / 'bench'))
+
+
+# --- statistics on synthetic data ----------------------------------------------------------------------------
+
+def test_the_wilson_interval_of_none_and_all_of_ten():
+    z2 = 1.959963984540054 ** 2
+    assert wilson_interval(0, 10) == pytest.approx((0.0, z2 / (10 + z2)))     # the closed form at p = 0
+    assert wilson_interval(10, 10) == pytest.approx((10 / (10 + z2), 1.0))
+
+
+def test_quantile_ranks_are_the_sign_test_interval_and_cover_95_percent():
+    assert quantile_ranks(10, 0.5) == (2, 9)           # the tabulated sign-test interval for n = 10
+    assert quantile_ranks(5, 0.5) == (None, None)      # 1 - 2 / 32 < 95 %: unbounded both sides
+    for n, q in ((10, 0.5), (100, 0.5), (1000, 0.5), (1000, 0.95), (3000, 0.95), (60, 0.95)):
+        low, high = quantile_ranks(n, q)
+        cdf = binomial_cdfs(n, q)
+        coverage = (cdf[high - 1] if high else 1.0) - (cdf[low - 1] if low else 0.0)
+        assert coverage >= 0.95
+        # each end as far in as it may be: one rank further in would leave more than 2.5 % on that side
+        if low:
+            assert cdf[low] > 0.025
+        if high:
+            assert 1.0 - cdf[high - 2] > 0.025
+
+
+def test_the_quantile_interval_covers_the_true_quantile_of_synthetic_samples():
+    rng = random.Random(7)
+    true_median, true_p95 = math.log(2.0), -math.log(0.05)          # of the unit exponential
+    hits = {0.5: 0, 0.95: 0}
+    repeats = 400
+    for _ in range(repeats):
+        sample = [rng.expovariate(1.0) for _ in range(200)]
+        for q, truth in ((0.5, true_median), (0.95, true_p95)):
+            interval = quantile(sample, q)
+            hits[q] += interval.low <= truth <= interval.high
+    assert hits[0.5] / repeats >= 0.93 and hits[0.95] / repeats >= 0.93     # 95 % nominal, 400 repeats
+    assert quantile([3.0, 1.0, 2.0, math.inf], 0.5).value == 2.0
+    assert quantile([1.0, math.inf, math.inf, math.inf], 0.5).value == math.inf   # on the failures
+
+
+def rows(rmse_cm, finished=None, chattering=1.0):
+    finished = finished or [True] * len(rmse_cm)
+    return [{'flight': k, 'controller': 'c', 'finished': ok, 'rmse_position_m': r / 100.0,
+             'chattering_force_n_per_s': chattering, 'chattering_moment_nm_per_s': chattering}
+            for k, (r, ok) in enumerate(zip(rmse_cm, finished))]
+
+
+def test_the_paired_comparison_counts_failures_as_losses_and_two_failures_as_a_tie():
+    reference = rows([2.0] * 10, [True] * 8 + [False] * 2)
+    kind = rows([1.0] * 6 + [3.0, math.nan, 5.0, math.nan], [True] * 7 + [False, True, False])
+    p = paired(kind, reference)
+    # flights 0-5 it is better; 6 worse; 7 it failed, the reference finished: worse;
+    # 8 it finished, the reference failed: better; 9 both failed: a tie
+    assert (p.pairs, p.kind_better, p.reference_better, p.ties) == (10, 7, 2, 1)
+    assert p.kind_better_share == 0.7
+    assert p.median_difference.value == pytest.approx(-0.01)      # [m]: 1 cm - 2 cm
+    # sorted: -inf (flight 8), six -1 cm, 0 (tie), +1 cm, +inf (flight 7): ranks 2 and 9 of 10
+    assert (p.median_difference.low, p.median_difference.high) == pytest.approx((-0.01, 0.01))
+    assert p.sign_test_p == pytest.approx(sign_test(7, 2))
+    with pytest.raises(ValueError, match='different flights'):
+        paired(kind[:9], reference)
+
+
+def test_the_median_paired_difference_interval_on_a_synthetic_shift():
+    rng = random.Random(3)
+    reference = [rng.uniform(2.0, 6.0) for _ in range(1000)]
+    kind = [r - 0.5 + rng.gauss(0.0, 0.3) for r in reference]        # 0.5 cm better, symmetric noise
+    p = paired(rows(kind), rows(reference))
+    low, high = p.median_difference.low * 100, p.median_difference.high * 100
+    assert low < -0.5 < high and high - low < 0.1
+    assert p.kind_better_share > 0.9 and p.sign_test_p < 1e-100
+
+
+def test_the_10_cm_threshold_is_strict_and_a_failure_is_never_under_it():
+    record = heldout_table.kind_record('c', 1, rows([9.99, 10.0, 3.0, 3.0], [True, True, True, False]))
+    assert record['under_10cm'] == 2 and record['finished'] == 3 and record['flights'] == 4
+    assert record['under_10cm_wilson95'] == pytest.approx(wilson_interval(2, 4))
+    assert record['rmse_p95_cm'] == math.inf                      # the failed flight is the worst
+
+
+# --- pairing separate campaigns -----------------------------------------------------------------------------
+
+DOCUMENT = {'scenario': 'paper', 'duration': 1.5, 'settle_time': 1.0, 'controllers': ['pid'], 'flights': 3,
+            'seed': 5, 'control_rate_hz': 250, 'physics_rate_hz': 500,
+            'vehicle': {'mass': 0.2, 'thrust_coefficient': 0.1},
+            'wind': {'mean_speed_mps': 1.0, 'turbulence': 'light'}}
+
+
+@pytest.fixture(scope='module')
+def scheduler():
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        yield cluster.scheduler_address
+
+
+def test_each_kinds_own_campaign_flies_the_same_perturbed_flights(scheduler, tmp_path):
+    """Campaigns of one seed flown apart, by different kinds with different gains files, pair flight by flight:
+    the same sampled vehicle and wind direction; another seed does not, and is refused."""
+    spec = parse_spec(DOCUMENT)
+    tuned = tmp_path / 'tuned.yaml'
+    tuned.write_text(yaml.safe_dump(with_values(load_gains(), 'se3', {d.name: d.low * 1.5 for d in search_space('se3')})))
+    folders = {}
+    for kind, gains in (('pid', None), ('se3', tuned), ('l1-se3', 'untuned')):
+        folders[kind] = tmp_path / kind
+        run_campaign(spec.overridden(controllers=[kind]), folders[kind],
+                     RunOptions(scheduler=scheduler, progress=False, report=False,
+                                gains_file=None if gains is None else str(gains)))
+    by_seed = heldout_table.read_all(folders.values())
+    assert list(by_seed) == [5] and len(by_seed[5]) == 9
+    first = {(row['controller'], row['flight']): row['mass_kg'] for row in by_seed[5]}
+    assert all(first[('se3', k)] == first[('pid', k)] == first[('l1-se3', k)] for k in range(3))
+    assert len({first[('pid', k)] for k in range(3)}) == 3             # and the flights do differ
+    other = tmp_path / 'other-seed'
+    run_campaign(spec.overridden(controllers=['pid'], seed=6), other,
+                 RunOptions(scheduler=scheduler, progress=False, report=False))
+    mixed = [dict(row, controller='se3') for row in heldout_table.read_all([other])[6]]
+    with pytest.raises(ValueError, match='not the same perturbed flight'):
+        heldout_table.check_paired(by_seed[5] + mixed, 5)
+    longer = tmp_path / 'longer'
+    run_campaign(spec.overridden(controllers=['pid'], duration=2.0, flights=1), longer,
+                 RunOptions(scheduler=scheduler, progress=False, report=False))
+    with pytest.raises(ValueError, match='spec differs'):
+        heldout_table.load([folders['pid'], longer])
+    lines = heldout_table.paired_lines(heldout_table.paired_records(by_seed, 'pid'))
+    assert [line.split('|')[1].strip() for line in lines[2:]] == ['se3', 'l1-se3']
+
+
+# --- named gains sets --------------------------------------------------------------------------------------
+
+def test_the_named_gains_sets_are_found_by_name_and_hold_every_gain(tmp_path, monkeypatch):
+    assert set(shipped_gains()) == {'packaged', 'untuned', 'paper-faithful'}
+    assert locate_gains('packaged') == locate_gains(None) == DEFAULT_CONTROLLER_FILE
+    assert locate_gains('untuned.yaml') == shipped_gains()['untuned']
+    for name in shipped_gains():
+        assert set(flatten_gains(load_gains(name))) == set(gain_names()), name   # complete: nothing falls back
+    with pytest.raises(ParameterError, match='named gains: packaged, paper-faithful, untuned'):
+        load_gains('nope')
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / 'untuned').write_text(yaml.safe_dump({'common': {'control_rate': 500.0}}))
+    assert load_gains('untuned') == {'common': {'control_rate': 500.0}}          # a file of that name wins
+
+
+def test_paper_faithful_is_the_untuned_set_with_the_paper_faithful_keys():
+    untuned = load_gains('untuned')
+    assert flatten_gains(load_gains('paper-faithful')) == {**flatten_gains(untuned), **PAPER_FAITHFUL}
+    assert untuned['l1_se3']['axes'] == untuned['se3']['axes']      # l1-se3 flew se3's law before it had its own
+    assert unflatten_gains(flatten_gains(untuned)) == untuned
+
+
+# --- packaging the tuned points ----------------------------------------------------------------------------
+
+def write_trials(folder: Path, kind: str, points: list[tuple[str, float, dict]]) -> None:
+    names = [d.name for d in search_space(kind)]
+    (folder / f'tune-{kind}').mkdir(parents=True)
+    with (folder / f'tune-{kind}' / f'trials-{kind}.csv').open('w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(['trial', 'state', 'objective_m', 'finished', 'flights', 'wall_time_s', *names])
+        for trial, (state, objective, point) in enumerate(points):
+            writer.writerow([trial, state, objective, 100, 100, 30.0, *(point[n] for n in names)])
+
+
+def test_package_puts_every_kinds_best_point_into_one_gains_file_keeping_its_comments(tmp_path):
+    into = tmp_path / 'controller.yaml'
+    into.write_text(DEFAULT_CONTROLLER_FILE.read_text())
+    expected = load_gains()
+    for kind, space in SEARCH_SPACES.items():
+        best = {d.name: d.low + (d.high - d.low) / 3.0 for d in space}
+        worse = {d.name: d.high for d in space}
+        pruned = {d.name: d.low for d in space}
+        write_trials(tmp_path, kind, [('complete', 0.05, worse), ('pruned', 0.001, pruned), ('complete', 0.03, best)])
+        expected = with_values(expected, kind, best)
+    report = scoreboard.package(tmp_path, tuple(SEARCH_SPACES), into, tmp_path / 'kept')
+    assert flatten_gains(load_gains(into)) == flatten_gains(expected)
+    assert values_in(load_gains(into), 'se3') != values_in(load_gains(into), 'l1-se3')   # each its own
+    text = into.read_text()
+    assert text.count('\n') == DEFAULT_CONTROLLER_FILE.read_text().count('\n') + len(SEARCH_SPACES)
+    assert text.startswith(scoreboard.PROVENANCE) and 'trial 2' in report[0]
+    assert '# [Hz] controller update rate' in text
+    assert sorted(p.name for p in (tmp_path / 'kept').iterdir()) == sorted(f'trials-{k}.csv' for k in SEARCH_SPACES)
+    scoreboard.package(tmp_path, ('pid',), into, None)                 # again: its header is replaced, not added
+    assert into.read_text().count(scoreboard.PROVENANCE) == 1
+
+
+def test_package_refuses_a_table_without_a_complete_trial(tmp_path):
+    write_trials(tmp_path, 'pid', [('pruned', 0.01, {d.name: d.low for d in search_space('pid')})])
+    into = tmp_path / 'controller.yaml'
+    into.write_text(DEFAULT_CONTROLLER_FILE.read_text())
+    with pytest.raises(ParameterError, match='no complete trial'):
+        scoreboard.package(tmp_path, ('pid',), into, None)
+    assert into.read_text() == DEFAULT_CONTROLLER_FILE.read_text()
+
+
+def test_the_generated_section_is_replaced_between_its_markers(tmp_path):
+    path = tmp_path / 'doc.md'
+    begin, end = scoreboard.MARKERS
+    path.write_text(f'intro\n{begin}\nold\n{end}\nafter\n')
+    scoreboard.write_section(path, 'new table')
+    assert path.read_text() == f'intro\n{begin}\nnew table\n{end}\nafter\n'
+    path.write_text('no markers')
+    with pytest.raises(ParameterError, match='generated section'):
+        scoreboard.write_section(path, 'x')
