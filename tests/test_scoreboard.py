@@ -22,6 +22,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / 'bench'))
 import heldout_table  # noqa: E402
+import paper_tables  # noqa: E402
 import scoreboard  # noqa: E402
 
 sys.path.remove(str(ROOT / 'bench'))
@@ -171,6 +172,8 @@ def test_paper_faithful_is_the_untuned_set_with_the_paper_faithful_keys():
     untuned = load_gains('untuned')
     assert flatten_gains(load_gains('paper-faithful')) == {**flatten_gains(untuned), **PAPER_FAITHFUL}
     assert untuned['l1_se3']['axes'] == untuned['se3']['axes']      # l1-se3 flew se3's law before it had its own
+    # the tables' paper-faithful rows fly the named set, whatever the packaged gains become after tuning
+    assert paper_tables.gains_for(None, faithful=True) == load_gains('paper-faithful')
     assert unflatten_gains(flatten_gains(untuned)) == untuned
 
 
