@@ -437,16 +437,23 @@ def costs(settings: Settings, tune_root: Path | None, flights: int) -> dict[str,
     return {kind: known[kind] for kind in settings.kinds}
 
 
+#: wall seconds per simulated second of one embedded flight (bench/paper_tables.py, one process) at 4 kHz and
+#: 1 kHz physics: bench/conditions_table.py's run of 2026-12-04 (6 kinds: 24 flights of 20 s at 1 kHz and about
+#: 120 delay-margin flights of 30 s at 4 kHz in 11 min on one shared core)
+EMBEDDED_4KHZ_COST, EMBEDDED_1KHZ_COST = 0.15, 0.04
+
+
 def plan(settings: Settings, cost: dict[str, float]) -> list[str]:
-    """The run's parts with their flights and estimated wall time (a campaign flight's cost scales with its
-    length; a delay-margin flight runs its physics at 4 kHz, counted as 2 campaign flights of its length)."""
+    """The run's parts with their flights and estimated wall time: a campaign flight's cost scales with its
+    length; the nominal, noise and delay-margin flights are single embedded flights (EMBEDDED_*_COST), run
+    ``--workers`` at a time."""
     s = settings
     per_second = {kind: c / s.duration for kind, c in cost.items()}
     heldout = sum(len(s.seeds) * s.flights * s.duration * per_second[k] for k in s.kinds)
     tries = sum(stress_tries(d) for d in s.disturbances)
     stress = sum(tries * s.stress_flights * s.stress_duration * per_second[k] for k in s.kinds)
-    nominal = sum(2 * s.nominal_duration * per_second[k] for k in s.kinds)
-    margin = sum(MARGIN_FLIGHTS * 2 * s.margin_duration * per_second[k] for k in s.kinds)
+    nominal = len(s.kinds) * 2 * s.nominal_duration * EMBEDDED_1KHZ_COST / jobs(s)
+    margin = len(s.kinds) * MARGIN_FLIGHTS * s.margin_duration * EMBEDDED_4KHZ_COST / jobs(s)
     rows = [('held out', f'{len(s.kinds)} kinds x {len(s.seeds)} seeds x {s.flights} flights of {s.duration:g} s',
              heldout),
             ('breaking points', f'{len(s.kinds)} kinds x {tries} tries at most ({len(s.disturbances)} disturbances) x '
