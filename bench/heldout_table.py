@@ -149,12 +149,16 @@ def paired_records(by_seed: dict[int, list[dict]], reference: str = REFERENCE) -
 
 
 def cm(value: float) -> str:
+    if math.isnan(value):
+        return 'none (too few flights)'
     if math.isinf(value):
         return 'failed' if value > 0 else '-inf'
     return f'{value:.2f}'
 
 
 def signed_cm(value: float) -> str:
+    if math.isnan(value):
+        return 'none (too few flights)'
     if math.isinf(value):
         return '+inf (it failed)' if value > 0 else '-inf (the reference failed)'
     return f'{value:+.2f}'

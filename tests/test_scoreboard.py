@@ -64,6 +64,9 @@ def test_the_quantile_interval_covers_the_true_quantile_of_synthetic_samples():
     assert hits[0.5] / repeats >= 0.93 and hits[0.95] / repeats >= 0.93     # 95 % nominal, 400 repeats
     assert quantile([3.0, 1.0, 2.0, math.inf], 0.5).value == 2.0
     assert quantile([1.0, math.inf, math.inf, math.inf], 0.5).value == math.inf   # on the failures
+    few = quantile([1.0, 2.0, 3.0, 4.0, 5.0], 0.5)
+    assert math.isnan(few.low) and math.isnan(few.high)                 # 5 values bound no 95 % interval
+    assert heldout_table.cm(few.high) == 'none (too few flights)' and heldout_table.cm(math.inf) == 'failed'
 
 
 def rows(rmse_cm, finished=None, chattering=1.0):

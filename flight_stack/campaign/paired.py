@@ -50,7 +50,8 @@ def quantile_ranks(n: int, q: float, confidence: float = CONFIDENCE) -> tuple[in
 
 @dataclass(frozen=True)
 class Quantile:
-    """A sample quantile with its distribution-free interval (ends +-inf where unbounded)."""
+    """A sample quantile with its distribution-free interval: an end is nan where too few values give one
+    (no rank leaves at most 2.5 % beyond it), +inf where it falls on failures."""
 
     q: float
     value: float
@@ -69,7 +70,7 @@ def quantile(values: Sequence[float], q: float, confidence: float = CONFIDENCE) 
         raise ValueError('quantile: a value is nan (count a failed flight as +inf)')
     l, u = quantile_ranks(n, q, confidence)
     value = ordered[max(1, math.ceil(n * q)) - 1]
-    return Quantile(q, value, ordered[l - 1] if l else -math.inf, ordered[u - 1] if u else math.inf, n)
+    return Quantile(q, value, ordered[l - 1] if l else math.nan, ordered[u - 1] if u else math.nan, n)
 
 
 def rmse_or_failed(row: dict) -> float:
