@@ -1,17 +1,15 @@
 """State a compiled kernel reads and writes in place: one flat float array, a *store*.
 
-A single-vehicle part of a controller (a network, a law, a rate filter) keeps its state in its
+A single-vehicle part of a controller (today the NNIT2FSMC law and its network) keeps its state in its
 ``store``: its arrays are views of it and its scalars sit at fixed slots, so that one compiled call
-steps the whole controller on a few arrays (:func:`.controller.cascade_step`). In Python a scalar
-still reads and writes as before (a float, None or a float, a bool, a tuple of floats) through a
-:class:`Slot`. A part of a batch has no store (``store`` None) and keeps plain attributes.
-
-:func:`rebind` moves the stores of several parts into one larger store (the controller's), their
-values kept, so that the controller's kernel reaches every part's state through one array.
+steps it on two arrays (its store and its constants: :func:`.axis_laws.nnit2fsmc_law_step`) instead of a
+dozen arguments numba must type one by one. In Python a scalar still reads and writes as before (a
+float, None or a float, a bool, a tuple of floats) through a :class:`Slot`, so the node, a retune
+(:mod:`.tuning`) and the tests see the same attributes. A part of a batch has no store (``store``
+None) and keeps plain attributes. A part's store can be a slice of a larger one (``bind``): the way
+towards one compiled step of the whole controller (docs/SPEED.md).
 """
 from __future__ import annotations
-
-import numpy as np
 
 FLOAT, OPTIONAL, BOOL, TUPLE = 'float', 'optional', 'bool', 'tuple'
 
@@ -58,14 +56,3 @@ class Slot:
         else:
             store[i] = value
 
-
-def rebind(parts, sizes) -> tuple[np.ndarray, np.ndarray]:
-    """(one store holding every part's store in turn, the offset of each part in it): each part's values are
-    copied into its slice and ``part.bind(slice)`` makes that slice its store. ``sizes``: each part's store size."""
-    offsets = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
-    store = np.zeros(int(offsets[-1]))
-    for part, start, end in zip(parts, offsets[:-1], offsets[1:]):
-        view = store[start:end]
-        view[:] = part.store
-        part.bind(view)
-    return store, offsets[:-1]
