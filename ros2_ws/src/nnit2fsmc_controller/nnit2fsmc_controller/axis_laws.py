@@ -98,10 +98,10 @@ _FUZZY = _NETWORK_CONSTANTS + 6
 
 
 @njit(cache=True)
-def nnit2fsmc_law_step(store, constants, e, de, ref_vel, ref_acc, learning):
-    """One vehicle's :meth:`NNIT2FSMCLaw.update` on its ``store`` (state, in place) and ``kernel_constants``:
-    :func:`nnit2fsmc_step` with the network's views, then the teaching, U_out and Z of this update kept in the
-    store. Returns (v, S, U_eq_hat, U_fuzzy)."""
+def nnit2fsmc_law_step(store, constants, e, de, ref_vel, ref_acc):
+    """One vehicle's :meth:`NNIT2FSMCLaw.update` on its ``store`` (state, in place: ``learning`` is read from
+    it) and ``kernel_constants``: :func:`nnit2fsmc_step` with the network's views, then the teaching, U_out and
+    Z of this update kept in the store. Returns (v, S, U_eq_hat, U_fuzzy)."""
     n_inputs, n_hidden = int(constants[_INPUTS]), int(constants[_HIDDEN])
     network = store[_NETWORK:]
     previous_inputs, hidden, output_weights, output_anchor, hidden_weights, hidden_anchor = network_views(
@@ -115,10 +115,24 @@ def nnit2fsmc_law_step(store, constants, e, de, ref_vel, ref_acc, learning):
     value, surface, equivalent, corrective, to_learn, output = nnit2fsmc_step(
         hidden_weights, output_weights, hidden_anchor, output_anchor, hidden, previous_inputs, network[0],
         store[_PENDING] != 0.0, store[_TEACHING], (c[0], c[1], c[2], c[3] != 0.0, c[4], c[5]), constants[_FUZZY:],
-        constants[_LAMBDA], e, de, inputs, learning)
+        constants[_LAMBDA], e, de, inputs, store[_LEARNING] != 0.0)
     store[_PENDING], store[_TEACHING], network[0] = 1.0, to_learn, output
     previous_inputs[:] = inputs
     return value + ref_acc if constants[_FEEDFORWARD] != 0.0 else value, surface, equivalent, corrective
+
+
+@njit(cache=True)
+def law_step(store, constants, e, de, ref_vel, ref_acc, drift, gain):
+    """The update of one vehicle's law of the kind ``constants[0]`` (its ``kernel_constants``) on its ``store``:
+    (v, S, equivalent, corrective), as the law's ``update(e, de, ref_vel, ref_acc, drift, gain)``. The laws
+    that offer a kernel: NNIT2FSMC_KERNEL (model-free: drift and gain unused)."""
+    return nnit2fsmc_law_step(store, constants, e, de, ref_vel, ref_acc)
+
+
+@njit(cache=True, inline='always')
+def set_law_learning(store, constants, learning):
+    """Set the ``learning`` flag (hold on the ground) of one vehicle's law in its ``store``."""
+    store[_LEARNING] = 1.0 if learning else 0.0
 
 
 def _per_vehicle(value, count: int) -> np.ndarray:
@@ -189,7 +203,7 @@ class NNIT2FSMCLaw:
         net = self.network
         if net.batch is None:
             return AxisOutput(*nnit2fsmc_law_step(self.store, self.kernel_constants, float(e), float(de),
-                                                  float(ref_vel), float(ref_acc), bool(self.learning)))
+                                                  float(ref_vel), float(ref_acc)))
         teaching = self._teaching
         pending = teaching is not None
         count = net.batch
