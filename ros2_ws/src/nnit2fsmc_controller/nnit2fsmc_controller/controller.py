@@ -299,30 +299,23 @@ def flat_attitude_of(ax, ay, jx, jy, sx, sy, psi, dpsi, ddpsi, z, g, limit):
 _CONSTANTS_SIZE = 41
 #: positions of the reference in the inputs of :func:`cascade_step` (after the 12-state)
 _POSITION, _VELOCITY, _ACCELERATION, _YAW, _YAW_RATE, _YAW_ACCELERATION, _JERK, _SNAP = 12, 15, 18, 21, 22, 23, 24, 27
-#: positions in the outputs of :func:`cascade_step`: forces, controls, per axis (v, S, equivalent, corrective), and
-#: phi_d, theta_d, psi_d
-_FORCES, _CONTROLS, _AXES, _ATTITUDE = 0, 4, 8, 32
 
 
 @njit(cache=True, inline='always')
-def _law(k, store, law_constants, c, e, de, ref_vel, ref_acc, drift, gain, out):
-    """Law k (AXES order) of the controller: its (v, ...) written to ``out``; v returned."""
+def _law(k, store, law_constants, c, e, de, ref_vel, ref_acc, drift, gain):
+    """Law k (AXES order) of the controller: its (v, S, equivalent, corrective)."""
     first, constants = int(c[_LAW_STORES + k]), int(c[_LAW_CONSTANTS + k])
     last = int(c[_LAW_STORES + k + 1]) if k < 5 else int(c[_FILTERS])
-    value, surface, equivalent, corrective = law_step(store[first:last], law_constants[constants:], e, de, ref_vel,
-                                                      ref_acc, drift, gain)
-    out[_AXES + 4 * k], out[_AXES + 4 * k + 1], out[_AXES + 4 * k + 2], out[_AXES + 4 * k + 3] = (
-        value, surface, equivalent, corrective)
-    return value
+    return law_step(store[first:last], law_constants[constants:], e, de, ref_vel, ref_acc, drift, gain)
 
 
 @njit(cache=True, error_model='numpy')
-def cascade_step(store, law_constants, c, mixer, inputs, out):
+def cascade_step(store, law_constants, c, mixer, inputs):
     """:meth:`CascadedController.update` of one vehicle whose six laws offer a kernel (:func:`.axis_laws.law_step`),
     in one compiled call: ``inputs`` the 12-state then the reference (_POSITION ...), ``store`` the state of the
     laws and the rate filters (in place), ``law_constants`` the laws' kernel constants, ``c`` the controller's
-    (_M ...), ``mixer`` the vehicle's. Writes forces, controls, the laws' outputs and the attitude reference
-    into ``out`` (_FORCES ...). The same equations, in the same order, as the update written for floats
+    (_M ...), ``mixer`` the vehicle's. Returns (forces, controls, each law's (v, S, equivalent, corrective) in
+    AXES order, (phi_d, theta_d, psi_d)). The same equations, in the same order, as the update written for floats
     and arrays."""
     x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = (
         inputs[0], inputs[1], inputs[2], inputs[3], inputs[4], inputs[5], inputs[6], inputs[7], inputs[8], inputs[9],
@@ -339,9 +332,10 @@ def cascade_step(store, law_constants, c, mixer, inputs, out):
                 first = int(c[_LAW_STORES + k])
                 set_law_learning(store[first:], law_constants[int(c[_LAW_CONSTANTS + k]):], airborne)
     cphi, ctheta = np.cos(phi), np.cos(theta)
-    ax_cmd = _law(0, store, law_constants, c, x - xd, vx - vxd, vxd, axd, -c[_KFX] * vx / m, 1.0, out)
-    ay_cmd = _law(1, store, law_constants, c, y - yd, vy - vyd, vyd, ayd, -c[_KFY] * vy / m, 1.0, out)
-    u1 = _law(2, store, law_constants, c, z - zd, vz - vzd, vzd, azd, -g - c[_KFZ] * vz / m, cphi * ctheta / m, out)
+    out_x = _law(0, store, law_constants, c, x - xd, vx - vxd, vxd, axd, -c[_KFX] * vx / m, 1.0)
+    out_y = _law(1, store, law_constants, c, y - yd, vy - vyd, vyd, ayd, -c[_KFY] * vy / m, 1.0)
+    out_z = _law(2, store, law_constants, c, z - zd, vz - vzd, vzd, azd, -g - c[_KFZ] * vz / m, cphi * ctheta / m)
+    ax_cmd, ay_cmd = out_x[0], out_y[0]
     if not airborne:
         ax_cmd, ay_cmd = 0.0, 0.0
     limit = (c[_TILT], c[_TILT + 1], c[_TILT + 2])
@@ -360,20 +354,18 @@ def cascade_step(store, law_constants, c, mixer, inputs, out):
         dtheta_d = dtheta_r = rate_of(store[filters + 6:filters + 9], theta_d, blend, dt)
         ddtheta_r = rate_of(store[filters + 9:filters + 12], dtheta_d, blend, dt)
     psi_d = inputs[_YAW]
-    u2 = _law(3, store, law_constants, c, phi - phi_d, dphi - dphi_d, dphi_r, ddphi_r,
-              (dtheta * dpsi * (iy - iz) - c[_KFPHI] * (dphi * abs(dphi))) / ix, c[_D] / ix, out)
-    u3 = _law(4, store, law_constants, c, theta - theta_d, dtheta - dtheta_d, dtheta_r, ddtheta_r,
-              (dphi * dpsi * (iz - ix) - c[_KFTHETA] * (dtheta * abs(dtheta))) / iy, c[_D] / iy, out)
-    u4 = _law(5, store, law_constants, c, wrap_angle(psi - psi_d), dpsi - yaw_rate, yaw_rate, yaw_acceleration,
-              (dphi * dtheta * (ix - iy) - c[_KFPSI] * (dpsi * abs(dpsi))) / iz, 1.0 / iz, out)
+    out_phi = _law(3, store, law_constants, c, phi - phi_d, dphi - dphi_d, dphi_r, ddphi_r,
+                   (dtheta * dpsi * (iy - iz) - c[_KFPHI] * (dphi * abs(dphi))) / ix, c[_D] / ix)
+    out_theta = _law(4, store, law_constants, c, theta - theta_d, dtheta - dtheta_d, dtheta_r, ddtheta_r,
+                     (dphi * dpsi * (iz - ix) - c[_KFTHETA] * (dtheta * abs(dtheta))) / iy, c[_D] / iy)
+    out_psi = _law(5, store, law_constants, c, wrap_angle(psi - psi_d), dpsi - yaw_rate, yaw_rate, yaw_acceleration,
+                   (dphi * dtheta * (ix - iy) - c[_KFPSI] * (dpsi * abs(dpsi))) / iz, 1.0 / iz)
     if c[_PRIORITY] != 0.0:
-        forces = priority_allocation(u1, u2, u3, u4, mixer, c[_F_MIN], c[_F_MAX])
+        forces = priority_allocation(out_z[0], out_phi[0], out_theta[0], out_psi[0], mixer, c[_F_MIN], c[_F_MAX])
     else:
-        forces = clip_allocation(u1, u2, u3, u4, mixer, c[_F_MIN], c[_F_MAX])
+        forces = clip_allocation(out_z[0], out_phi[0], out_theta[0], out_psi[0], mixer, c[_F_MIN], c[_F_MAX])
     controls = controls_from_forces(forces[0], forces[1], forces[2], forces[3], mixer)
-    for i in range(4):
-        out[_FORCES + i], out[_CONTROLS + i] = forces[i], controls[i]
-    out[_ATTITUDE], out[_ATTITUDE + 1], out[_ATTITUDE + 2] = phi_d, theta_d, psi_d
+    return forces, controls, (out_x, out_y, out_z, out_phi, out_theta, out_psi), (phi_d, theta_d, psi_d)
 
 
 class CascadedController:
@@ -449,8 +441,7 @@ class CascadedController:
         constants[_LAW_CONSTANTS:_LAW_CONSTANTS + 6] = constant_offsets[:6]
         constants[_FILTERS] = offsets[6]
         self.store = store
-        self._kernel = (store, np.concatenate(law_constants), constants, np.ascontiguousarray(p.mixer),
-                        np.empty(_ATTITUDE + 3))
+        self._kernel = (store, np.concatenate(law_constants), constants, np.ascontiguousarray(p.mixer))
 
     def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
         """Rotor thrusts [N] for the 12-state ``state`` and the reference at the same instant t [s].
@@ -515,16 +506,12 @@ class CascadedController:
 
     def _kernel_update(self, state: Sequence, reference: ReferenceSample) -> ControlOutput:
         """:meth:`update` of a single vehicle by :func:`cascade_step` (inputs checked)."""
-        store, law_constants, constants, mixer, out = self._kernel
+        store, law_constants, constants, mixer = self._kernel
         inputs = np.array((*state, *reference.position, *reference.velocity, *reference.acceleration, reference.yaw,
                            reference.yaw_rate, reference.yaw_acceleration, *reference.jerk, *reference.snap),
                           dtype=float)
-        cascade_step(store, law_constants, constants, mixer, inputs, out)
-        v = out.tolist()
-        return ControlOutput(
-            forces=tuple(v[_FORCES:_FORCES + 4]), controls=tuple(v[_CONTROLS:_CONTROLS + 4]),
-            axes={axis: AxisOutput(*v[_AXES + 4 * k:_AXES + 4 * k + 4]) for k, axis in enumerate(AXES)},
-            attitude_reference=tuple(v[_ATTITUDE:_ATTITUDE + 3]))
+        forces, controls, axes, attitude = cascade_step(store, law_constants, constants, mixer, inputs)
+        return ControlOutput(forces, controls, dict(zip(AXES, map(AxisOutput._make, axes))), attitude)
 
     def adapt(self) -> None:
         """Take the online learning of the last update now rather than at the start of the next one.
