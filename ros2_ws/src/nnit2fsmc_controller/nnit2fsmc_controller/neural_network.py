@@ -209,24 +209,23 @@ class EquivalentControlNetwork:
                           for _ in range(n_hidden)]
         self.batch = batch
         self.n_inputs, self.n_hidden = n_inputs, n_hidden
-        vehicles = () if batch is None else (batch,)
-        if batch is None:
+        # hidden weights Wz[j][i], (H, I) or (B, H, I): random, to break the symmetry between hidden units;
+        # output weights Wy[j], (H,) or (B, H): zero, so the network starts knowing nothing (U_eq_hat = 0);
+        # their anchors W0 (of the leakage): the initial weights
+        if batch is None:   # every array a view of the store, zeros at first
             self.bind(np.zeros(network_store_size(n_inputs, n_hidden)))
             self.hidden_weights[:] = self._hidden_anchor[:] = initial_hidden
         else:
-            #: hidden weights Wz[j][i], (H, I) or (B, H, I): random, to break the symmetry between hidden units
-            self.hidden_weights = np.tile(np.array(initial_hidden), vehicles + (1, 1))
-            #: output weights Wy[j], (H,) or (B, H): zero, so the network starts knowing nothing (U_eq_hat = 0)
-            self.output_weights = np.zeros(vehicles + (n_hidden,))
-            #: anchors W0 of the leakage: the initial weights
+            self.hidden_weights = np.tile(np.array(initial_hidden), (batch, 1, 1))
+            self.output_weights = np.zeros((batch, n_hidden))
             self._hidden_anchor, self._output_anchor = self.hidden_weights.copy(), self.output_weights.copy()
+            self._inputs, self._hidden, self._output = np.zeros((batch, n_inputs)), np.zeros((batch, n_hidden)), \
+                np.zeros(batch)
         #: (learning rate, K_eq, leakage, e-modification?, weight limit, adaptation-rate bound): the learning
         #: step's constants, in :func:`learning_step`'s order (a network's constants are fixed when it is built;
         #: a retune builds a new one)
         self.kernel_constants = (self.learning_rate, self.output_gain, self.leakage, self.modification == 'e',
                                  self.weight_limit, self.max_rate)
-        if batch is not None:
-            self._inputs, self._hidden, self._output = np.zeros((batch, n_inputs)), np.zeros((batch, n_hidden)), np.zeros(batch)
 
     def bind(self, store: np.ndarray) -> None:
         """Make ``store`` (of :func:`network_store_size` floats, holding this network's values) its store."""
