@@ -4,9 +4,12 @@ same attributes."""
 import numpy as np
 import pytest
 
+from nnit2fsmc_controller.axis_laws import NNIT2FSMCLaw
 from nnit2fsmc_controller.factory import (PAPER_FAITHFUL, build_controller, flatten_gains, load_gains, nnit2fsmc_law,
                                           unflatten_gains)
+from nnit2fsmc_controller.it2_fuzzy import IT2FuzzyCorrector
 from nnit2fsmc_controller.kernel_state import BOOL, OPTIONAL, TUPLE, Slot
+from nnit2fsmc_controller.neural_network import EquivalentControlNetwork
 from nnit2fsmc_controller.tuning import retune
 from quad_msgs_bridge.reference import SetpointPath, hold
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
@@ -92,3 +95,12 @@ def test_the_compiled_single_vehicle_update_equals_a_batch_of_one(kind, variant)
             single.adapt(), batch.adapt()
     retuned = retune(single, gains)   # the state carried into a fresh store
     assert retuned.update(0.4, state, reference).forces == single.update(0.4, state, reference).forces
+
+
+def test_a_law_refuses_a_network_whose_inputs_its_kernel_does_not_fill():
+    """The kernel writes Z = (ref_vel, ref_acc, 1), or (1,) with bias_only, into the network's inputs."""
+    fuzzy = IT2FuzzyCorrector(input_scale=1.0, output_gain=1.0)
+    with pytest.raises(ValueError, match='network of 2 inputs'):
+        NNIT2FSMCLaw(1.0, fuzzy, EquivalentControlNetwork(2, 4, output_gain=1.0, learning_rate=0.1))
+    with pytest.raises(ValueError, match='network of 3 inputs'):
+        NNIT2FSMCLaw(1.0, fuzzy, EquivalentControlNetwork(3, 4, output_gain=1.0, learning_rate=0.1), bias_only=True)

@@ -123,9 +123,10 @@ def nnit2fsmc_law_step(store, constants, e, de, ref_vel, ref_acc):
 
 @njit(cache=True)
 def law_step(store, constants, e, de, ref_vel, ref_acc, drift, gain):
-    """The update of one vehicle's law of the kind ``constants[0]`` (its ``kernel_constants``) on its ``store``:
-    (v, S, equivalent, corrective), as the law's ``update(e, de, ref_vel, ref_acc, drift, gain)``. The laws
-    that offer a kernel: NNIT2FSMC_KERNEL (model-free: drift and gain unused)."""
+    """The update of one vehicle's law on its ``store`` with its ``kernel_constants``: (v, S, equivalent,
+    corrective), as the law's ``update(e, de, ref_vel, ref_acc, drift, gain)``. The entry every law kind that
+    offers a kernel goes through; today the NNIT2FSMC family alone (``constants[0]`` NNIT2FSMC_KERNEL;
+    model-free: drift and gain unused). A kind added here branches on ``constants[0]``."""
     return nnit2fsmc_law_step(store, constants, e, de, ref_vel, ref_acc)
 
 
@@ -182,6 +183,9 @@ class NNIT2FSMCLaw:
         self.network = network
         self.bias_only = bias_only
         self.feedforward = feedforward
+        if network.n_inputs != (1 if bias_only else 3):
+            raise ValueError(f'NNIT2FSMC law: its network takes (ref_vel, ref_acc, 1), or (1,) with bias_only; '
+                             f'got a network of {network.n_inputs} inputs')
         if network.batch is None:
             store = np.zeros(_NETWORK + network.store.size)
             store[_NETWORK:] = network.store
