@@ -203,6 +203,14 @@ class QuadrotorModel:
         self.disturbances = disturbances
         self._constants = vehicle_constants(params)
         self._table = disturbance_table(disturbances)
+        self._still = None
+
+    def _still_air(self, count: int) -> tuple:
+        """Three zero arrays of ``count`` elements: the air velocity a batch step is handed without wind (the
+        kernel does not read it then), made once rather than at every step."""
+        if self._still is None or self._still[0].shape[0] != count:
+            self._still = _arrays((0.0, 0.0, 0.0), count)
+        return self._still
 
     def with_vehicle(self, params: VehicleParams) -> 'QuadrotorModel':
         """The same model flying ``params`` from now on (a payload, a rotor loss: the simulator's vehicle changes)."""
@@ -234,9 +242,9 @@ class QuadrotorModel:
         windy = air_velocity is not None
         if isinstance(s[0], np.ndarray):
             count = s[0].shape[0]
-            air = air_velocity if windy else (0.0, 0.0, 0.0)
+            air = _arrays(air_velocity, count) if windy else self._still_air(count)
             return list(_rk4_batch(self._constants, self._table, float(t), _arrays(s, count), _arrays(forces, count),
-                                   float(dt), _arrays(air, count), windy))
+                                   float(dt), air, windy))
         return list(_step_one(self._constants, self._table, t, _floats(s, STATE_SIZE), _floats(forces, 4), dt,
                               _floats(air_velocity, 3) if windy else (0.0, 0.0, 0.0), windy))
 
