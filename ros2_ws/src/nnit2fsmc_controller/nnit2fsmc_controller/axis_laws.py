@@ -137,8 +137,22 @@ def set_law_learning(store, constants, learning):
 
 
 def _per_vehicle(value, count: int) -> np.ndarray:
-    """A contiguous float array of ``count`` elements (a float is shared by every vehicle)."""
+    """A contiguous float array of ``count`` elements (a float is shared by every vehicle): ``value`` itself when
+    it already is one (the usual case, checked first: this runs several times per law and control step)."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (count,) \
+            and value.flags.c_contiguous:
+        return value
     return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=float), (count,)))
+
+
+def _per_vehicle_flags(value, count: int) -> np.ndarray:
+    """A bool array of ``count`` elements (a bool is shared by every vehicle): ``value`` itself when it is one."""
+    if type(value) is np.ndarray and value.dtype == np.bool_ and value.shape == (count,) \
+            and value.flags.c_contiguous:
+        return value
+    flags = np.empty(count, dtype=bool)
+    flags[:] = value
+    return flags
 
 
 class NNIT2FSMCLaw:
@@ -212,13 +226,12 @@ class NNIT2FSMCLaw:
         pending = teaching is not None
         count = net.batch
         inputs = net.stacked_inputs((1.0,) if self.bias_only else (ref_vel, ref_acc, 1.0))
-        learning = np.empty(count, dtype=bool)
-        learning[:] = self.learning
         teaching = teaching if pending else np.zeros(count)
         values, net._output = _nnit2fsmc_batch(
             net.hidden_weights, net.output_weights, net._hidden_anchor, net._output_anchor, net._hidden,
             net._inputs, net._output, pending, _per_vehicle(teaching, count), net.kernel_constants,
-            self.fuzzy.kernel_parameters, self.lam, _per_vehicle(e, count), _per_vehicle(de, count), inputs, learning)
+            self.fuzzy.kernel_parameters, self.lam, _per_vehicle(e, count), _per_vehicle(de, count), inputs,
+            _per_vehicle_flags(self.learning, count))
         net._inputs = inputs
         value, surface, equivalent, corrective, self._teaching = values
         return AxisOutput(value + ref_acc if self.feedforward else value, surface, equivalent, corrective)
