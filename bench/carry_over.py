@@ -6,7 +6,7 @@ Cases (``--cases``), each on ``--vehicle`` (a shipped name or a file) and ``--pl
 * ``lemniscate``: the fast figure-eight (2.8 m/s, 4 m/s^2), section IV disturbances;
 * ``circle``: the ``circle-fast`` scenario (R = 2 m, 2.51 m/s, 3.16 m/s^2, heading held at 0), section IV
   disturbances: the circle on which issue 28 saw a roll/pitch limit cycle in RotorPy;
-* ``wind``: the paper helix in 8 m/s mean wind with moderate Dryden gusts, seeds 0..S-1;
+* ``wind``: the paper helix in 8 m/s mean wind with moderate Dryden gusts, seeds F..F+S-1 (``--first-seed``, ``--seeds``);
 * ``loss``: the paper helix with a 25 % loss of every rotor from 10 s on.
 
 Every flight has 5 ms of motor lag (``motor_time_constant_s`` on our plant; RotorPy's own motors on
@@ -93,11 +93,11 @@ def flown(kind: str, scenario: str, duration: float, gains, **world) -> dict:
             'U1_max': float(flight.controls[late, 0].max())}
 
 
-def worlds(case: str, vehicle, plant: str, seeds: int) -> list[tuple[str, dict]]:
+def worlds(case: str, vehicle, plant: str, seeds: range) -> list[tuple[str, dict]]:
     """[(scenario, world keyword arguments of fly), ...] of a case."""
     common = dict(vehicle=vehicle, plant=plant, motor_time_constant_s=MOTOR_LAG if plant == 'quad_sim' else 0.0)
     if case == 'wind':
-        return [('paper', dict(common, wind=WIND, seed=seed)) for seed in range(seeds)]
+        return [('paper', dict(common, wind=WIND, seed=seed)) for seed in seeds]
     if case == 'loss':
         return [('paper', dict(common, rotor_efficiency_loss=LOSS))]
     return [({'circle': 'circle-fast'}.get(case, case), common)]
@@ -110,7 +110,8 @@ def main(argv=None) -> int:
     parser.add_argument('--plant', default='quad_sim', help='quad_sim or rotorpy')
     parser.add_argument('--gains', default='before,after', help='before, after or both (comma-separated)')
     parser.add_argument('--kinds', default=','.join(KINDS))
-    parser.add_argument('--seeds', type=int, default=3, help='wind seeds')
+    parser.add_argument('--seeds', type=int, default=3, help='wind seeds: how many')
+    parser.add_argument('--first-seed', type=int, default=0, help='wind seeds: the first')
     parser.add_argument('--duration', type=float, default=30.0, help='[s] every flight')
     parser.add_argument('--json', type=Path, help='append the results (one JSON object per line)')
     args = parser.parse_args(argv)
@@ -121,7 +122,8 @@ def main(argv=None) -> int:
                     continue   # the baselines' gains are the same before and after: flown once, as 'after'
                 with gains_of(which, args.vehicle) as gains:
                     rows = [flown(kind, scenario, args.duration, gains, **world)
-                            for scenario, world in worlds(case, args.vehicle, args.plant, args.seeds)]
+                            for scenario, world in worlds(case, args.vehicle, args.plant,
+                                                                  range(args.first_seed, args.first_seed + args.seeds))]
                 label = which if kind.startswith('nnit2fsmc') else 'both'
                 print(f'{case:10s} {args.plant:8s} {kind:13s} {label:6s} finished {sum(r["finished"] for r in rows)}'
                       f'/{len(rows)}  RMSE [cm] ' + ' '.join(f'{r["rmse_cm"]:.2f}' for r in rows)
