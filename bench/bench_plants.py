@@ -3,7 +3,8 @@
 RotorPy (solve_ivp in Python), with its effects off (rotorpy-bare) and on (rotorpy).
 
 Each figure is the median over samples of a short inner loop of steps of a hovering vehicle (1 ms steps),
-after a warm-up; the ratio to our model is printed beside it. Run from the repository root:
+after a warm-up; the ratio to our model is printed beside it, and for RotorPy the part of it spent in
+RotorPy's own ``Multirotor.step`` (the rest is our wrapper). Run from the repository root:
 
     .venv/bin/python bench/bench_plants.py            # about 10 s
     .venv/bin/python bench/bench_plants.py --quick
@@ -45,10 +46,34 @@ def main() -> None:
     forces = (params.hover_force,) * 4
     ours = None
     for name in PLANTS:
-        seconds = step_time(make_plant(name, params, disturbances), state, forces, samples, loop)
+        plant = make_plant(name, params, disturbances)
+        seconds = step_time(plant, state, forces, samples, loop)
         ours = ours or seconds
         print(f'{name:13s} {seconds * 1e6:9.1f} us per vehicle and physics step   x{seconds / ours:7.1f}   '
-              f'a 20 s flight at 1 kHz: {seconds * 20000:6.1f} s of plant time')
+              f'a 20 s flight at 1 kHz: {seconds * 20000:6.1f} s of plant time', flush=True)
+        if name != 'quad_sim':
+            alone = rotorpy_alone(plant, state, forces, samples, loop)
+            print(f'{"":13s} {alone * 1e6:9.1f} us of it in RotorPy\'s own Multirotor.step (without the section IV '
+                  f'disturbances): our wrapper {100.0 * (1.0 - alone / seconds):.0f} %', flush=True)
+
+
+def rotorpy_alone(plant, state, forces, samples: int, loop: int) -> float:
+    """Median wall time [s] of RotorPy's own ``Multirotor.step`` of the plant's vehicle (a plain Multirotor of the
+    same parameters, the same integrator settings), from the plant's converted state and thrusts: what is left
+    of a step without our wrapper (conversions, section IV disturbances)."""
+    from quad_msgs_bridge.rotorpy_conversion import motor_thrust_commands, rotorpy_state
+    from quad_sim.rotorpy_plant import import_multirotor
+    vehicle = plant._vehicles[0]
+    multirotor = import_multirotor()(vehicle.quad, control_abstraction='cmd_motor_thrusts', aero=plant.aero,
+                                     enable_ground=False)
+    multirotor.integrator_kwargs = {'method': 'RK45', 'first_step': 1e-3}
+    rotorpy = rotorpy_state(state, vehicle.rotor_speeds, None)
+    control = {'cmd_motor_thrusts': motor_thrust_commands(forces, vehicle.params)}
+
+    class Alone:
+        def step(self, *_):
+            multirotor.step(rotorpy, control, 1e-3)
+    return step_time(Alone(), state, forces, samples, loop)
 
 
 if __name__ == '__main__':

@@ -54,14 +54,29 @@ def test_the_bound_caps_the_adaptation_rate_and_leaves_a_slower_one_alone():
     assert adaptation_rate(slow) == adaptation_rate(unbounded)
 
 
+def body_rates_after(flight, start: float) -> np.ndarray:
+    """Body rates p, q, r [rad/s, body FLU] of the flight's rows from ``start`` [s] on."""
+    late = flight.time >= start
+    return np.array([body_rates_from_euler_rates(row[6:9], row[9:12]) for row in flight.state[late]])
+
+
 @pytest.mark.parametrize('vehicle', ['paper', 'hummingbird'])
 def test_no_roll_pitch_limit_cycle_on_the_fast_lemniscate(vehicle):
     """The lemniscate (2.8 m/s, 4 m/s^2) at 1 kHz on the paper's "+" vehicle and on an X frame: the body rates
     stay those of the path (about 0.56 rad/s roll, as every baseline flies it), not a growing limit cycle (5 rad/s
     before the bound on the paper's vehicle; 4.4 rad/s and 2.3 m RMSE on the hummingbird)."""
     flight = fly('nnit2fsmc', 'lemniscate', duration=20.0, vehicle=vehicle)
-    late = flight.time >= 5.0
-    rates = np.array([body_rates_from_euler_rates(row[6:9], row[9:12]) for row in flight.state[late]])
-    roll_rms, pitch_rms = np.sqrt(np.mean(rates[:, :2] ** 2, axis=0))
+    roll_rms, pitch_rms = np.sqrt(np.mean(body_rates_after(flight, 5.0)[:, :2] ** 2, axis=0))
     assert roll_rms < 0.8 and pitch_rms < 0.3
+    assert flight.summary['rmse_position_m'] < 0.03
+
+
+def test_no_limit_cycle_on_the_fast_circle_on_an_x_frame():
+    """``circle-fast`` (R = 2 m, 2.51 m/s, 3.16 m/s^2) on the hummingbird (X frame), 1 kHz: the body rates are
+    those of the circle, |p, q, r| RMS 0.40 rad/s for every kind (docs/VEHICLES.md), not the limit cycle that the
+    NNIT2FSMC's gains before issue 28 flew (bench/carry_over.py's ``before_gains``): as flown here, 5.2 rad/s and
+    8.6 cm RMSE over 5-12 s against 0.40 rad/s and 1.5 cm; with 5 ms motor lag over 5-30 s, 6.1 rad/s and 59 cm."""
+    flight = fly('nnit2fsmc', 'circle-fast', duration=12.0, vehicle='hummingbird')
+    rates = body_rates_after(flight, 5.0)
+    assert np.sqrt(np.mean(np.sum(rates ** 2, axis=1))) < 0.6
     assert flight.summary['rmse_position_m'] < 0.03

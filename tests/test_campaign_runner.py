@@ -383,3 +383,15 @@ def test_the_held_out_table_reads_a_campaign_folder(reference_run):
         assert cells[0] == '2' and cells[1] == '5'                   # seed, flights
         for printed, column in zip(cells[-1].split(' / '), ('chattering_force_n_per_s', 'chattering_moment_nm_per_s')):
             assert printed == f'{np.percentile([r[column] for r in mine], 50):.3g}', column
+
+
+def test_a_local_pool_starts_its_workers_when_made_and_they_exit_once_closed():
+    """The workers start at once (they import the stack while the kernels compile in the parent), and a closed
+    pool's workers exit by themselves (the results are written meanwhile): join returns, every one exited 0."""
+    from flight_stack.campaign.runner import _LocalPool
+    pool = _LocalPool(2)
+    assert len(pool.processes) == 2 and all(process.is_alive() for process in pool.processes)
+    pool.close(cancel=False)
+    pool.join()
+    assert [process.exitcode for process in pool.processes] == [0, 0]
+    pool.close(cancel=True)      # closing again (run_campaign's last word) changes nothing

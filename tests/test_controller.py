@@ -442,13 +442,13 @@ COMPILED_KERNELS = '''
 import json, sys
 sys.path[:0] = sys.argv[1:]
 from nnit2fsmc_controller.factory import compile_kernels, load_gains
-from nnit2fsmc_controller.axis_laws import nnit2fsmc_step
+from nnit2fsmc_controller.controller import cascade_step
 from nnit2fsmc_controller.neural_network import learning_step
 from quad_msgs_bridge.frames import _quaternion
 from quad_msgs_bridge.reference import _quintic_channels
 from quad_msgs_bridge.state import _state_fields
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
-kernels = (_state_fields, _quintic_channels, nnit2fsmc_step, learning_step, _quaternion)
+kernels = (_state_fields, _quintic_channels, cascade_step, learning_step, _quaternion)
 before = [len(kernel.signatures) for kernel in kernels]
 compile_kernels('nnit2fsmc', load_vehicle_file()[0], load_gains())
 print(json.dumps([before, [len(kernel.signatures) for kernel in kernels]]))

@@ -138,7 +138,7 @@ from nnit2fsmc_controller.neural_network import EquivalentControlNetwork
 fuzzy = IT2FuzzyCorrector(input_scale=2.0, output_gain=3.0)
 law = NNIT2FSMCLaw(lam=1.5, fuzzy=fuzzy, network=EquivalentControlNetwork(3, 5, output_gain=2.0, learning_rate=0.1))
 out = law.update(0.4, 0.3, 0.1, 0.0, 0.0, 1.0)
-stats = axis_laws.nnit2fsmc_step.stats
+stats = axis_laws.nnit2fsmc_law_step.stats   # the kernel a single vehicle's law runs (it inlines nnit2fsmc_step)
 print(json.dumps({'law': out.corrective, 'fuzzy': fuzzy(out.surface),
                   'hits': sum(stats.cache_hits.values()), 'misses': sum(stats.cache_misses.values())}))
 '''
@@ -205,7 +205,7 @@ def test_an_edit_reaches_the_law_cached_in_numba_cache_dir_too(tmp_path):
     env['NUMBA_CACHE_DIR'] = str(tmp_path / 'numba-cache')
 
     first = call_the_law(tree, env)
-    assert any((tmp_path / 'numba-cache').rglob('axis_laws.nnit2fsmc_step-*.nbi'))
+    assert any((tmp_path / 'numba-cache').rglob('axis_laws.nnit2fsmc_law_step-*.nbi'))
     assert not any(tree.rglob('*.nbi'))
     fuzzy_source = tree / 'nnit2fsmc_controller' / 'it2_fuzzy.py'
     fuzzy_source.write_text(fuzzy_source.read_text() + DOUBLED_FUZZY_TERM)

@@ -75,3 +75,16 @@ def test_every_vehicle_of_a_batch_larger_than_a_refill_chunk_draws_its_own_seque
     for k in (0, REFILL_CHUNK - 1, REFILL_CHUNK, 2 * REFILL_CHUNK, size - 1):
         reference = np.random.default_rng(100 + k).standard_normal((2 * BLOCK_STEPS, width))
         np.testing.assert_array_equal(rows[:, :, k], reference)
+
+
+def test_one_stream_alone_is_that_field_of_the_flights_streams():
+    """flight_stream(seed, k, purpose): the Generator flight_streams(seed, k).<purpose> is (a campaign builds
+    only the streams its perturbations draw from); an unknown purpose or a bad seed is refused."""
+    from quad_sim.perturbations.streams import flight_stream
+    streams = flight_streams(5, 31)
+    for purpose in FlightStreams._fields:
+        assert flight_stream(5, 31, purpose).random(6).tolist() == getattr(streams, purpose).random(6).tolist()
+    with pytest.raises(ParameterError, match='purpose'):
+        flight_stream(5, 31, 'gusts')
+    with pytest.raises(ParameterError, match='seed'):
+        flight_stream(-1, 31, 'wind')

@@ -19,7 +19,7 @@ from nnit2fsmc_controller.estimation import VelocityFilter
 from nnit2fsmc_controller.gain_units import in_vehicle_units
 from nnit2fsmc_controller.it2_fuzzy import CENTRES, CONSEQUENTS, LABELS, RULES
 from nnit2fsmc_controller.neural_network import EquivalentControlNetwork
-from nnit2fsmc_controller.trajectory import Helix, Lemniscate, Waypoints, make_scenario
+from nnit2fsmc_controller.trajectory import Circle, Helix, Lemniscate, Waypoints, make_scenario
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.review.metrics import flight_metrics
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
@@ -212,7 +212,7 @@ def test_learning_rate_per_second_gives_the_same_rate_per_second_at_any_control_
             gains['nnit2fsmc']['axes'][axis]['learning_rate'] / gains['common']['control_rate'], rel=1e-12)
 
 
-@pytest.mark.parametrize('trajectory', [Helix(), Lemniscate(), Waypoints()], ids=lambda t: type(t).__name__)
+@pytest.mark.parametrize('trajectory', [Helix(), Lemniscate(), Circle(), Waypoints()], ids=lambda t: type(t).__name__)
 def test_jerk_and_snap_are_the_derivatives_of_acceleration_and_jerk(trajectory):
     h = 1e-4
     for t in np.linspace(0.3, trajectory.duration - 0.3, 23):
@@ -235,6 +235,20 @@ def test_lemniscate_is_a_fast_figure_eight_and_a_scenario():
     speeds = [math.hypot(*lemniscate.sample(t).velocity[:2]) for t in np.arange(0.0, 40.0, 0.01)]
     assert 2.5 < max(speeds) < 3.0 and speeds[0] == 0.0
     assert lemniscate.initial_state[2] == 0.0
+
+
+def test_circle_fast_is_a_2_5_m_s_circle_of_2_m_after_its_ramp_and_a_scenario():
+    circle = make_scenario('circle-fast')
+    samples = [circle.sample(float(t)) for t in np.arange(0.0, 30.0, 0.01)]
+    speeds = np.array([math.hypot(*s.velocity[:2]) for s in samples])
+    radii = np.array([math.hypot(*s.position[:2]) for s in samples])
+    accelerations = np.array([math.hypot(*s.acceleration[:2]) for s in samples])
+    assert speeds[0] == 0.0 and circle.initial_state[:3] == [2.0, 0.0, 0.0]
+    after_ramp = np.arange(0.0, 30.0, 0.01) >= 4.0
+    np.testing.assert_allclose(speeds[after_ramp], 2.0 * math.pi * 0.2 * 2.0, rtol=1e-9)     # 2.51 m/s
+    np.testing.assert_allclose(accelerations[after_ramp], 2.0 * (2.0 * math.pi * 0.2) ** 2, rtol=1e-9)
+    np.testing.assert_allclose(radii, 2.0, rtol=1e-12)
+    assert {s.yaw for s in samples} == {0.0} and {s.position[2] for s in samples} == {1.0}
 
 
 @pytest.mark.slow

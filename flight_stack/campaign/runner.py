@@ -205,11 +205,19 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def _started() -> None:
+    """A local worker's first task: nothing. Submitting it starts the worker, which then imports the stack (to
+    unpickle its initializer) while this process compiles the kernels."""
+
+
 class _LocalPool:
     def __init__(self, workers: int):
         self.workers = workers
         self.executor = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context('spawn'),
                                             initializer=_ignore_sigint)
+        for _ in range(workers):     # one process starts per task submitted while none is idle
+            self.executor.submit(_started)
+        self.processes = list(self.executor._processes.values())
 
     def submit(self, job):
         return self.executor.submit(fly_batch, job)
@@ -220,10 +228,17 @@ class _LocalPool:
         return wait(futures, return_when=FIRST_COMPLETED).done
 
     def close(self, cancel: bool) -> None:
+        """Tell the workers to exit once their tasks are done (``cancel``: terminate them now); returns at once
+        (:meth:`join` waits for them). Closing again does nothing more."""
         if cancel:
-            for process in list(getattr(self.executor, '_processes', {}).values()):
+            for process in self.processes:
                 process.terminate()
-        self.executor.shutdown(wait=not cancel, cancel_futures=cancel)
+        self.executor.shutdown(wait=False, cancel_futures=cancel)
+
+    def join(self) -> None:
+        """Wait for the closed pool's workers to exit."""
+        for process in self.processes:
+            process.join()
 
 
 class _DaskPool:
@@ -253,6 +268,9 @@ class _DaskPool:
     def close(self, cancel: bool) -> None:
         self.client.close()
 
+    def join(self) -> None:
+        """Nothing to wait for: the cluster's workers stay."""
+
 
 @dataclass
 class CampaignOutcome:
@@ -278,10 +296,18 @@ def run_campaign(spec: CampaignSpec, out_dir: Path, options: RunOptions) -> Camp
     CampaignSetup.of(spec, options.vehicle_file, options.gains_file).check_controllers(spec.controllers)
     check_output(spec, out_dir, options.resume)
     with stop_signals():   # SIGTERM stops it as Ctrl-C does: workers stopped, flights.csv closed
-        if options.scheduler is None:
+        if options.scheduler is not None:
+            with writing(out_dir):
+                return _fly_missing(spec, out_dir, options, workers, _DaskPool(options.scheduler))
+        # the local workers start now, and import the stack while the kernels compile here
+        pool = _LocalPool(min(workers, max(1, math.ceil(flights_to_fly(spec, set())
+                                                        / batch_size(spec, options, workers)))))
+        try:
             _compile(spec, options)
-        with writing(out_dir):
-            return _fly_missing(spec, out_dir, options, workers)
+            with writing(out_dir):
+                return _fly_missing(spec, out_dir, options, workers, pool)
+        finally:
+            pool.close(cancel=True)    # after a whole campaign: nothing left to stop
 
 
 def _compile(spec: CampaignSpec, options: RunOptions) -> None:
@@ -294,15 +320,14 @@ def _compile(spec: CampaignSpec, options: RunOptions) -> None:
     say(f'{time.perf_counter() - started:.1f} s (the worker processes load them from the cache)')
 
 
-def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers: int) -> CampaignOutcome:
+def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers: int, pool) -> CampaignOutcome:
+    """Fly the missing flights on ``pool`` into ``out_dir``, then write the results while its workers exit."""
     done = prepare_output(spec, out_dir, options.resume)
     total = flights_to_fly(spec, done)
     jobs = plan_jobs(spec, done, options, workers)
     flights = FlightsFile(out_dir / FLIGHTS_FILE, COLUMNS)
     started = time.perf_counter()
     steps = 0
-    pool = (_DaskPool(options.scheduler) if options.scheduler
-            else _LocalPool(min(workers, max(1, math.ceil(total / batch_size(spec, options, workers))))))
     progress = _progress_bar(total, spec.flights * len(spec.controllers) - total, options.progress)
     cancelled = False
     try:
@@ -322,6 +347,7 @@ def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers
         pool.close(cancel=cancelled)
     wall = time.perf_counter() - started
     summary_path = write_results(spec, out_dir, wall_time_s=wall, vehicle_steps=steps, report=options.report)
+    pool.join()
     return CampaignOutcome(total, wall, steps, summary_path)
 
 

@@ -1,7 +1,8 @@
 """Flight k of a campaign: its sampled conditions, and the perturbation objects that fly them.
 
 Everything random about flight k comes from the streams of
-``quad_sim.perturbations.streams.flight_streams(seed, k)``: the true vehicle from ``vehicle``
+``quad_sim.perturbations.streams.flight_streams(seed, k)`` (each built alone, by ``flight_stream``, when
+the spec draws from it): the true vehicle from ``vehicle``
 (exactly :data:`VEHICLE_DRAWS` uniform numbers, one per perturbed value, in the order of
 :data:`VEHICLE_DRAW_ORDER`, whether or not the spec perturbs it), the mean wind direction from
 ``wind``, the turbulence, the sensor noise and its bias from their own streams. A flight's result
@@ -19,7 +20,7 @@ import numpy as np
 from quad_msgs_bridge.vehicle_params import VehicleParams
 from quad_sim.perturbations.actuation import MotorLag, TransportDelay
 from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
-from quad_sim.perturbations.streams import flight_streams
+from quad_sim.perturbations.streams import flight_stream
 from quad_sim.perturbations.wind import Wind
 
 from ..embedded import Perturbations
@@ -64,8 +65,7 @@ class FlightConditions:
 
 def sample_conditions(spec: CampaignSpec, nominal: VehicleParams, flight: int) -> FlightConditions:
     """The conditions of flight ``flight`` of ``spec`` around the ``nominal`` vehicle."""
-    streams = flight_streams(spec.seed, flight)
-    uniforms = iter(streams.vehicle.random(VEHICLE_DRAWS).tolist())
+    uniforms = iter(flight_stream(spec.seed, flight, 'vehicle').random(VEHICLE_DRAWS).tolist())
     draws = {key: [next(uniforms) for _ in range(count)] for key, count in VEHICLE_DRAW_ORDER}
 
     def relative(key: str, index: int) -> float:
@@ -89,7 +89,7 @@ def sample_conditions(spec: CampaignSpec, nominal: VehicleParams, flight: int) -
         cog_offset=(absolute('cog_offset_m', 0), absolute('cog_offset_m', 1), 0.0),
         rotor_efficiency_loss=tuple(losses))
     direction = (math.radians(spec.wind_direction_deg) if spec.wind_direction_deg is not None
-                 else float(streams.wind.uniform(0.0, 2.0 * math.pi)))
+                 else float(flight_stream(spec.seed, flight, 'wind').uniform(0.0, 2.0 * math.pi)))
     return FlightConditions(flight, vehicle, direction)
 
 
@@ -112,10 +112,8 @@ def build_perturbations(spec: CampaignSpec, conditions: Sequence[FlightCondition
                         physics_dt: float, batch: bool) -> Perturbations:
     """The perturbation objects that fly ``conditions``: of one vehicle (``batch`` false, one
     condition) or of a batch (arrays, one element and one random stream per flight, in order)."""
-    streams = [flight_streams(spec.seed, c.flight) for c in conditions]
-
     def rngs(purpose: str):
-        chosen = [getattr(s, purpose) for s in streams]
+        chosen = [flight_stream(spec.seed, c.flight, purpose) for c in conditions]
         return chosen if batch else chosen[0]
 
     vehicle = VehicleParams.stack([c.vehicle for c in conditions]) if batch else conditions[0].vehicle

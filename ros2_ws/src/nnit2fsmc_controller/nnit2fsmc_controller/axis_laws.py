@@ -32,7 +32,8 @@ from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.vehicle_params import check_number
 
 from .it2_fuzzy import IT2FuzzyCorrector, corrective_term, input_scale_of
-from .neural_network import EquivalentControlNetwork, forward_pass, learning_step
+from .kernel_state import BOOL, OPTIONAL, Slot
+from .neural_network import EquivalentControlNetwork, forward_pass, learning_step, network_views
 
 
 class AxisOutput(NamedTuple):
@@ -84,9 +85,74 @@ def _nnit2fsmc_batch(hidden_weights, output_weights, hidden_anchor, output_ancho
     return values, outputs
 
 
+#: the law kinds that offer their update as a kernel of one vehicle (:func:`law_step`), the first of their
+#: ``kernel_constants``
+NNIT2FSMC_KERNEL = 0.0
+#: positions in an NNIT2FSMC law's store: the teaching flag and value (``_teaching``), ``learning``, then its
+#: network's store (:func:`.neural_network.network_views`)
+_PENDING, _TEACHING, _LEARNING, _NETWORK = range(4)
+#: positions in an NNIT2FSMC law's kernel_constants: kind, lambda, feedforward, bias_only, inputs I, hidden H,
+#: then the network's kernel_constants (6) and the corrector's kernel_parameters
+_LAMBDA, _FEEDFORWARD, _BIAS_ONLY, _INPUTS, _HIDDEN, _NETWORK_CONSTANTS = range(1, 7)
+_FUZZY = _NETWORK_CONSTANTS + 6
+
+
+@njit(cache=True)
+def nnit2fsmc_law_step(store, constants, e, de, ref_vel, ref_acc):
+    """One vehicle's :meth:`NNIT2FSMCLaw.update` on its ``store`` (state, in place: ``learning`` is read from
+    it) and ``kernel_constants``: :func:`nnit2fsmc_step` with the network's views, then the teaching, U_out and
+    Z of this update kept in the store. Returns (v, S, U_eq_hat, U_fuzzy)."""
+    n_inputs, n_hidden = int(constants[_INPUTS]), int(constants[_HIDDEN])
+    network = store[_NETWORK:]
+    previous_inputs, hidden, output_weights, output_anchor, hidden_weights, hidden_anchor = network_views(
+        network, n_inputs, n_hidden)
+    inputs = np.empty(n_inputs)
+    if constants[_BIAS_ONLY] != 0.0:
+        inputs[0] = 1.0
+    else:
+        inputs[0], inputs[1], inputs[2] = ref_vel, ref_acc, 1.0
+    c = constants[_NETWORK_CONSTANTS:_FUZZY]
+    value, surface, equivalent, corrective, to_learn, output = nnit2fsmc_step(
+        hidden_weights, output_weights, hidden_anchor, output_anchor, hidden, previous_inputs, network[0],
+        store[_PENDING] != 0.0, store[_TEACHING], (c[0], c[1], c[2], c[3] != 0.0, c[4], c[5]), constants[_FUZZY:],
+        constants[_LAMBDA], e, de, inputs, store[_LEARNING] != 0.0)
+    store[_PENDING], store[_TEACHING], network[0] = 1.0, to_learn, output
+    previous_inputs[:] = inputs
+    return value + ref_acc if constants[_FEEDFORWARD] != 0.0 else value, surface, equivalent, corrective
+
+
+@njit(cache=True)
+def law_step(store, constants, e, de, ref_vel, ref_acc, drift, gain):
+    """The update of one vehicle's law on its ``store`` with its ``kernel_constants``: (v, S, equivalent,
+    corrective), as the law's ``update(e, de, ref_vel, ref_acc, drift, gain)``. The entry every law kind that
+    offers a kernel goes through; today the NNIT2FSMC family alone (``constants[0]`` NNIT2FSMC_KERNEL;
+    model-free: drift and gain unused). A kind added here branches on ``constants[0]``."""
+    return nnit2fsmc_law_step(store, constants, e, de, ref_vel, ref_acc)
+
+
+@njit(cache=True, inline='always')
+def set_law_learning(store, constants, learning):
+    """Set the ``learning`` flag (hold on the ground) of one vehicle's law in its ``store``."""
+    store[_LEARNING] = 1.0 if learning else 0.0
+
+
 def _per_vehicle(value, count: int) -> np.ndarray:
-    """A contiguous float array of ``count`` elements (a float is shared by every vehicle)."""
+    """A contiguous float array of ``count`` elements (a float is shared by every vehicle): ``value`` itself when
+    it already is one (the usual case, checked first: this runs several times per law and control step)."""
+    if type(value) is np.ndarray and value.dtype == np.float64 and value.shape == (count,) \
+            and value.flags.c_contiguous:
+        return value
     return np.ascontiguousarray(np.broadcast_to(np.asarray(value, dtype=float), (count,)))
+
+
+def _per_vehicle_flags(value, count: int) -> np.ndarray:
+    """A bool array of ``count`` elements (a bool is shared by every vehicle): ``value`` itself when it is one."""
+    if type(value) is np.ndarray and value.dtype == np.bool_ and value.shape == (count,) \
+            and value.flags.c_contiguous:
+        return value
+    flags = np.empty(count, dtype=bool)
+    flags[:] = value
+    return flags
 
 
 class NNIT2FSMCLaw:
@@ -118,6 +184,9 @@ class NNIT2FSMCLaw:
     """
 
     STATE = ('_teaching',)   #: what a retune keeps (nnit2fsmc_controller.tuning); the network's is its own
+    store = None   #: a single vehicle's state: _teaching, learning, then the network's store (kernel_state)
+    _teaching = Slot(_PENDING, OPTIONAL)   #: fuzzy term the network has yet to learn from (0 where it must not learn)
+    learning = Slot(_LEARNING, BOOL)    #: False (per vehicle) holds the network: set by the controller each update
 
     def __init__(self, lam: float, fuzzy: IT2FuzzyCorrector, network: EquivalentControlNetwork,
                  bias_only: bool = False, feedforward: bool = False):
@@ -128,31 +197,41 @@ class NNIT2FSMCLaw:
         self.network = network
         self.bias_only = bias_only
         self.feedforward = feedforward
-        self._teaching = None   #: fuzzy term the network has yet to learn from (0 where it must not learn)
-        self.learning = True    #: False (per vehicle) holds the network: set by the controller each update
+        if network.n_inputs != (1 if bias_only else 3):
+            raise ValueError(f'NNIT2FSMC law: its network takes (ref_vel, ref_acc, 1), or (1,) with bias_only; '
+                             f'got a network of {network.n_inputs} inputs')
+        if network.batch is None:
+            store = np.zeros(_NETWORK + network.store.size)
+            store[_NETWORK:] = network.store
+            self.bind(store)
+            #: (NNIT2FSMC_KERNEL, lambda, feedforward, bias_only, I, H, the network's and the corrector's constants)
+            self.kernel_constants = np.array((NNIT2FSMC_KERNEL, self.lam, feedforward, bias_only, network.n_inputs,
+                                              network.n_hidden, *network.kernel_constants,
+                                              *fuzzy.kernel_parameters), dtype=float)
+        self._teaching = None
+        self.learning = True
+
+    def bind(self, store) -> None:
+        """Make ``store`` (holding this law's values) its store, the network's part of it the network's."""
+        self.store = store
+        self.network.bind(store[_NETWORK:])
 
     def update(self, e, de, ref_vel, ref_acc, drift, gain) -> AxisOutput:
         """Takes the learning step still pending, then S, U_fuzzy(S) and U_eq_hat(Z) (:func:`nnit2fsmc_step`)."""
         net = self.network
+        if net.batch is None:
+            return AxisOutput(*nnit2fsmc_law_step(self.store, self.kernel_constants, float(e), float(de),
+                                                  float(ref_vel), float(ref_acc)))
         teaching = self._teaching
         pending = teaching is not None
-        if net.batch is None:
-            inputs = (1.0,) if self.bias_only else (float(ref_vel), float(ref_acc), 1.0)
-            value, surface, equivalent, corrective, self._teaching, net._output = nnit2fsmc_step(
-                net.hidden_weights, net.output_weights, net._hidden_anchor, net._output_anchor, net._hidden,
-                net._inputs, net._output, pending, teaching if pending else 0.0, net.kernel_constants,
-                self.fuzzy.kernel_parameters, self.lam, float(e), float(de), inputs, bool(self.learning))
-            net._inputs = inputs
-            return AxisOutput(value + ref_acc if self.feedforward else value, surface, equivalent, corrective)
         count = net.batch
         inputs = net.stacked_inputs((1.0,) if self.bias_only else (ref_vel, ref_acc, 1.0))
-        learning = np.empty(count, dtype=bool)
-        learning[:] = self.learning
         teaching = teaching if pending else np.zeros(count)
         values, net._output = _nnit2fsmc_batch(
             net.hidden_weights, net.output_weights, net._hidden_anchor, net._output_anchor, net._hidden,
             net._inputs, net._output, pending, _per_vehicle(teaching, count), net.kernel_constants,
-            self.fuzzy.kernel_parameters, self.lam, _per_vehicle(e, count), _per_vehicle(de, count), inputs, learning)
+            self.fuzzy.kernel_parameters, self.lam, _per_vehicle(e, count), _per_vehicle(de, count), inputs,
+            _per_vehicle_flags(self.learning, count))
         net._inputs = inputs
         value, surface, equivalent, corrective, self._teaching = values
         return AxisOutput(value + ref_acc if self.feedforward else value, surface, equivalent, corrective)

@@ -62,10 +62,11 @@ from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.numeric import BATCH, namespace_for, select
 from quad_msgs_bridge.reference import REFERENCE_UNITS, ReferenceSample
 from quad_msgs_bridge.state import STATE_LAYOUT, STATE_NAMES
-from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, controls_from_forces
+from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, clip_allocation, controls_from_forces, priority_allocation
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
-from .axis_laws import AxisOutput
+from .axis_laws import AxisOutput, law_step, set_law_learning
+from .kernel_state import OPTIONAL, Slot
 
 AXES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
 ATTITUDE_RATES = ('flatness', 'filter')   #: sources of the desired roll/pitch rates (module docstring)
@@ -172,25 +173,45 @@ def check_allocation(allocation: str) -> str:
     return allocation
 
 
+@njit(cache=True, inline='always', error_model='numpy')
+def filtered_rate(rate, previous, value, blend, dt):
+    """The next rate of :class:`RateFilter` from its last ``rate``, the ``previous`` and the new sample ``value``."""
+    return rate + blend * ((value - previous) / dt - rate)
+
+
 class RateFilter:
     """First-order filtered derivative of a signal sampled every dt [s], time constant tau [s].
 
-    The first sample gives rate 0 (a batch starts all its vehicles together).
+    The first sample gives rate 0 (a batch starts all its vehicles together). ``store`` (3 floats): a single
+    vehicle's state kept there (:mod:`.kernel_state`), as the controller's kernel reads it (:func:`rate_of`).
     """
 
     STATE = ('previous', 'rate')   #: what a retune keeps (nnit2fsmc_controller.tuning)
+    STORE_SIZE = 3
+    previous = Slot(0, OPTIONAL)   #: the last sample (None before the first)
+    rate = Slot(2)                 #: the filtered derivative
 
-    def __init__(self, dt: float, tau: float):
+    def __init__(self, dt: float, tau: float, store=None):
         self.blend = dt / (tau + dt)
         self.dt = dt
+        self.store = store
         self.previous = None
         self.rate = 0.0
 
     def update(self, value):
         if self.previous is not None:
-            self.rate = self.rate + self.blend * ((value - self.previous) / self.dt - self.rate)
+            self.rate = filtered_rate(self.rate, self.previous, value, self.blend, self.dt)
         self.previous = value
         return self.rate
+
+
+@njit(cache=True, inline='always', error_model='numpy')
+def rate_of(store, value, blend, dt):
+    """:meth:`RateFilter.update` of a single vehicle's filter with ``store`` (3 floats: RateFilter's slots)."""
+    if store[0] != 0.0:
+        store[2] = filtered_rate(store[2], store[1], value, blend, dt)
+    store[0], store[1] = 1.0, value
+    return store[2]
 
 
 class TiltLimit:
@@ -272,8 +293,88 @@ def flat_attitude_of(ax, ay, jx, jy, sx, sy, psi, dpsi, ddpsi, z, g, limit):
     return np.arctan(cc), dc / r, ddc / r - 2.0 * cc * dc * dc / (r * r), theta, dtheta, ddtheta
 
 
+#: positions in a CascadedController's kernel constants (:func:`cascade_step`)
+(_M, _G, _KFX, _KFY, _KFZ, _IX, _IY, _IZ, _KFPHI, _KFTHETA, _KFPSI, _D, _F_MIN, _F_MAX, _TAKEOFF, _FLATNESS, _PRIORITY,
+ _BLEND, _DT, _TILT, _HELD, _LAW_STORES, _LAW_CONSTANTS, _FILTERS) = (*range(20), 22, 28, 34, 40)
+_CONSTANTS_SIZE = 41
+#: positions of the reference in the inputs of :func:`cascade_step` (after the 12-state)
+_POSITION, _VELOCITY, _ACCELERATION, _YAW, _YAW_RATE, _YAW_ACCELERATION, _JERK, _SNAP = 12, 15, 18, 21, 22, 23, 24, 27
+
+
+@njit(cache=True, inline='always')
+def _law(k, store, law_constants, c, e, de, ref_vel, ref_acc, drift, gain):
+    """Law k (AXES order) of the controller: its (v, S, equivalent, corrective)."""
+    first, constants = int(c[_LAW_STORES + k]), int(c[_LAW_CONSTANTS + k])
+    last = int(c[_LAW_STORES + k + 1]) if k < 5 else int(c[_FILTERS])
+    return law_step(store[first:last], law_constants[constants:], e, de, ref_vel, ref_acc, drift, gain)
+
+
+@njit(cache=True, error_model='numpy')
+def cascade_step(store, law_constants, c, mixer, inputs):
+    """:meth:`CascadedController.update` of one vehicle whose six laws offer a kernel (:func:`.axis_laws.law_step`),
+    in one compiled call: ``inputs`` the 12-state then the reference (_POSITION ...), ``store`` the state of the
+    laws and the rate filters (in place), ``law_constants`` the laws' kernel constants, ``c`` the controller's
+    (_M ...), ``mixer`` the vehicle's. Returns (forces, controls, each law's (v, S, equivalent, corrective) in
+    AXES order, (phi_d, theta_d, psi_d)). The same equations, in the same order, as the update written for floats
+    and arrays."""
+    x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = (
+        inputs[0], inputs[1], inputs[2], inputs[3], inputs[4], inputs[5], inputs[6], inputs[7], inputs[8], inputs[9],
+        inputs[10], inputs[11])
+    xd, yd, zd = inputs[_POSITION], inputs[_POSITION + 1], inputs[_POSITION + 2]
+    vxd, vyd, vzd = inputs[_VELOCITY], inputs[_VELOCITY + 1], inputs[_VELOCITY + 2]
+    axd, ayd, azd = inputs[_ACCELERATION], inputs[_ACCELERATION + 1], inputs[_ACCELERATION + 2]
+    m, g, ix, iy, iz = c[_M], c[_G], c[_IX], c[_IY], c[_IZ]
+    airborne = True
+    if c[_TAKEOFF] > 0.0:
+        airborne = z > c[_TAKEOFF]
+        for k in range(6):
+            if c[_HELD + k] != 0.0:
+                first = int(c[_LAW_STORES + k])
+                set_law_learning(store[first:], law_constants[int(c[_LAW_CONSTANTS + k]):], airborne)
+    cphi, ctheta = np.cos(phi), np.cos(theta)
+    out_x = _law(0, store, law_constants, c, x - xd, vx - vxd, vxd, axd, -c[_KFX] * vx / m, 1.0)
+    out_y = _law(1, store, law_constants, c, y - yd, vy - vyd, vyd, ayd, -c[_KFY] * vy / m, 1.0)
+    out_z = _law(2, store, law_constants, c, z - zd, vz - vzd, vzd, azd, -g - c[_KFZ] * vz / m, cphi * ctheta / m)
+    ax_cmd, ay_cmd = out_x[0], out_y[0]
+    if not airborne:
+        ax_cmd, ay_cmd = 0.0, 0.0
+    limit = (c[_TILT], c[_TILT + 1], c[_TILT + 2])
+    phi_d, theta_d = attitude_of_accelerations(ax_cmd, ay_cmd, psi, z, g, limit)
+    filters, blend, dt = int(c[_FILTERS]), c[_BLEND], c[_DT]
+    yaw_rate, yaw_acceleration = inputs[_YAW_RATE], inputs[_YAW_ACCELERATION]
+    if c[_FLATNESS] != 0.0:
+        phi_r, dphi_r, ddphi_r, theta_r, dtheta_r, ddtheta_r = flat_attitude_of(
+            axd, ayd, inputs[_JERK], inputs[_JERK + 1], inputs[_SNAP], inputs[_SNAP + 1], psi, yaw_rate,
+            yaw_acceleration, z, g, limit)
+        dphi_d = dphi_r + rate_of(store[filters:filters + 3], phi_d - phi_r, blend, dt)
+        dtheta_d = dtheta_r + rate_of(store[filters + 6:filters + 9], theta_d - theta_r, blend, dt)
+    else:
+        dphi_d = dphi_r = rate_of(store[filters:filters + 3], phi_d, blend, dt)
+        ddphi_r = rate_of(store[filters + 3:filters + 6], dphi_d, blend, dt)
+        dtheta_d = dtheta_r = rate_of(store[filters + 6:filters + 9], theta_d, blend, dt)
+        ddtheta_r = rate_of(store[filters + 9:filters + 12], dtheta_d, blend, dt)
+    psi_d = inputs[_YAW]
+    out_phi = _law(3, store, law_constants, c, phi - phi_d, dphi - dphi_d, dphi_r, ddphi_r,
+                   (dtheta * dpsi * (iy - iz) - c[_KFPHI] * (dphi * abs(dphi))) / ix, c[_D] / ix)
+    out_theta = _law(4, store, law_constants, c, theta - theta_d, dtheta - dtheta_d, dtheta_r, ddtheta_r,
+                     (dphi * dpsi * (iz - ix) - c[_KFTHETA] * (dtheta * abs(dtheta))) / iy, c[_D] / iy)
+    out_psi = _law(5, store, law_constants, c, wrap_angle(psi - psi_d), dpsi - yaw_rate, yaw_rate, yaw_acceleration,
+                   (dphi * dtheta * (ix - iy) - c[_KFPSI] * (dpsi * abs(dpsi))) / iz, 1.0 / iz)
+    if c[_PRIORITY] != 0.0:
+        forces = priority_allocation(out_z[0], out_phi[0], out_theta[0], out_psi[0], mixer, c[_F_MIN], c[_F_MAX])
+    else:
+        forces = clip_allocation(out_z[0], out_phi[0], out_theta[0], out_psi[0], mixer, c[_F_MIN], c[_F_MAX])
+    controls = controls_from_forces(forces[0], forces[1], forces[2], forces[3], mixer)
+    return forces, controls, (out_x, out_y, out_z, out_phi, out_theta, out_psi), (phi_d, theta_d, psi_d)
+
+
 class CascadedController:
-    """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws."""
+    """update(t, state, reference) -> rotor thrusts, for any set of per-axis laws.
+
+    A single vehicle whose six laws offer a kernel (``kernel_constants`` and a ``store``, today the NNIT2FSMC
+    family) is updated by one compiled call, :func:`cascade_step`, on one store holding the state of its laws
+    and rate filters (:mod:`.kernel_state`); any other (a batch, other laws) by the same equations written
+    for floats and arrays below."""
 
     STATE = ()   #: its state lives in its laws and rate filters (nnit2fsmc_controller.tuning)
 
@@ -312,6 +413,35 @@ class CascadedController:
         self._held_on_ground = ([laws[axis] for axis in HELD_ON_GROUND if hasattr(laws[axis], 'learning')]
                                 if self.takeoff_height > 0.0 else [])   #: the laws with a state to hold
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
+        self._kernel = None
+        if batch is None and all(hasattr(laws[axis], 'kernel_constants') for axis in AXES):
+            self._bind_kernel(tau)
+
+    def _bind_kernel(self, tau: float) -> None:
+        """One store for the laws and rate filters (their values kept) and the constants of :func:`cascade_step`."""
+        laws = [self.laws[axis] for axis in AXES]
+        sizes = [law.store.size for law in laws] + [RateFilter.STORE_SIZE] * 4
+        offsets = np.concatenate(([0], np.cumsum(sizes))).astype(int)
+        store = np.zeros(offsets[-1])
+        for law, start, end in zip(laws, offsets, offsets[1:]):
+            store[start:end] = law.store
+            law.bind(store[start:end])
+        self._filters = {name: RateFilter(self.dt, tau, store[offsets[6 + k]:offsets[7 + k]])
+                         for k, name in enumerate(('dphi', 'ddphi', 'dtheta', 'ddtheta'))}
+        law_constants = [law.kernel_constants for law in laws]
+        constant_offsets = np.concatenate(([0], np.cumsum([len(c) for c in law_constants])))
+        p = self.params
+        constants = np.zeros(_CONSTANTS_SIZE)
+        constants[:_TILT + 3] = (p.m, p.g, p.Kfx, p.Kfy, p.Kfz, p.Ix, p.Iy, p.Iz, p.Kfphi, p.Kftheta, p.Kfpsi, p.d,
+                                 p.F_min, p.F_max, self.takeoff_height, self.attitude_rates == 'flatness',
+                                 self.allocation == 'priority', self._filters['dphi'].blend, self.dt,
+                                 *self.tilt_limit.kernel_parameters)
+        constants[_HELD:_HELD + 6] = [law in self._held_on_ground for law in laws]
+        constants[_LAW_STORES:_LAW_STORES + 6] = offsets[:6]
+        constants[_LAW_CONSTANTS:_LAW_CONSTANTS + 6] = constant_offsets[:6]
+        constants[_FILTERS] = offsets[6]
+        self.store = store
+        self._kernel = (store, np.concatenate(law_constants), constants, np.ascontiguousarray(p.mixer))
 
     def update(self, t: float, state: Sequence, reference: ReferenceSample) -> ControlOutput:
         """Rotor thrusts [N] for the 12-state ``state`` and the reference at the same instant t [s].
@@ -321,6 +451,8 @@ class CascadedController:
         its learning) runs.
         """
         xp = check_inputs(t, state, reference, self.batch)
+        if self._kernel is not None:
+            return self._kernel_update(state, reference)
         p = self.params
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         laws = self.laws
@@ -371,6 +503,15 @@ class CascadedController:
             controls=controls_from_forces(*forces, p.mixer),
             axes={'x': out_x, 'y': out_y, 'z': out_z, 'phi': out_phi, 'theta': out_theta, 'psi': out_psi},
             attitude_reference=(phi_d, theta_d, psi_d))
+
+    def _kernel_update(self, state: Sequence, reference: ReferenceSample) -> ControlOutput:
+        """:meth:`update` of a single vehicle by :func:`cascade_step` (inputs checked)."""
+        store, law_constants, constants, mixer = self._kernel
+        inputs = np.array((*state, *reference.position, *reference.velocity, *reference.acceleration, reference.yaw,
+                           reference.yaw_rate, reference.yaw_acceleration, *reference.jerk, *reference.snap),
+                          dtype=float)
+        forces, controls, axes, attitude = cascade_step(store, law_constants, constants, mixer, inputs)
+        return ControlOutput(forces, controls, dict(zip(AXES, map(AxisOutput._make, axes))), attitude)
 
     def adapt(self) -> None:
         """Take the online learning of the last update now rather than at the start of the next one.

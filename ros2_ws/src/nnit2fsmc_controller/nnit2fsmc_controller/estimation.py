@@ -155,10 +155,11 @@ class MeasurementStage:
         return tuple(f for f in (self.complementary, self.velocity) if f is not None)
 
     def __call__(self, state) -> list:
-        if not self.filters:
+        filters = self.filters
+        if not filters:
             return list(state)
         if not namespace_for(state[0]).all_finite(state):
             raise ValueError('measurement stage: non-finite measured state')
-        for stage_filter in self.filters:
+        for stage_filter in filters:
             state = stage_filter(state)
         return list(state)

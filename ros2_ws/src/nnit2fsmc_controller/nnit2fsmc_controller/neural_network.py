@@ -43,6 +43,10 @@ its arithmetic, and a control step runs six of them); :meth:`EquivalentControlNe
 reports the gradient factors the learning step uses, from the same helpers. A batch of B
 vehicles (one network per vehicle, each learning from its own fuzzy term) runs the same kernels
 vehicle after vehicle, in compiled loops: weights (B, H, I) and (B, H), one row per vehicle.
+
+A single-vehicle network keeps all its state in one flat float array, its ``store``
+(:mod:`.kernel_state`; layout :func:`network_views`), so that a compiled law or controller step reaches
+it through one argument; its weight arrays are views of the store.
 """
 from __future__ import annotations
 
@@ -55,6 +59,8 @@ from numba import njit
 
 import quad_msgs_bridge.kernel_cache  # noqa: F401  (the cache stamps of the kernels below)
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+
+from .kernel_state import TUPLE, Slot
 
 MODIFICATIONS = ('none', 'sigma', 'e')   #: leakage of the learning law (module docstring)
 
@@ -142,6 +148,22 @@ def learning_step(hidden_weights, output_weights, hidden_anchor, output_anchor, 
         output_weights[j] = _clipped(w - leak * (w - output_anchor[j]) - output_step, limit)
 
 
+def network_store_size(n_inputs: int, n_hidden: int) -> int:
+    """Floats in a single-vehicle network's store (:func:`network_views`)."""
+    return 1 + n_inputs + 3 * n_hidden + 2 * n_hidden * n_inputs
+
+
+@njit(cache=True, inline='always')
+def network_views(store, n_inputs, n_hidden):
+    """The views of a single-vehicle network's ``store`` (U_out is ``store[0]``): the inputs Z of the last
+    forward pass (I,), the hidden outputs Y (H,), the output weights Wy and their anchors (H,), the hidden
+    weights Wz and their anchors (H, I)."""
+    i, h = n_inputs, n_hidden
+    start = 1 + i + 3 * h
+    return (store[1:1 + i], store[1 + i:1 + i + h], store[1 + i + h:1 + i + 2 * h], store[1 + i + 2 * h:start],
+            store[start:start + h * i].reshape((h, i)), store[start + h * i:start + 2 * h * i].reshape((h, i)))
+
+
 @njit(cache=True)
 def _forward_batch(hidden_weights, output_weights, inputs, hidden, output):
     for b in range(output.shape[0]):
@@ -161,6 +183,9 @@ class EquivalentControlNetwork:
 
     #: what a retune keeps (nnit2fsmc_controller.tuning): the weights and the last forward pass
     STATE = ('hidden_weights', 'output_weights', '_inputs', '_hidden', '_output')
+    store = None   #: a single vehicle's state (module docstring); None for a batch
+    _output = Slot(0)   #: U_out of the last forward pass (a float; (B,) for a batch)
+    _inputs = Slot(1, TUPLE, length=lambda network: network.n_inputs)   #: its Z (a tuple; (B, I) for a batch)
 
     def __init__(self, n_inputs: int, n_hidden: int, output_gain: float, learning_rate: float,
                  weight_limit: float = 10.0, initial_spread: float = 0.5, seed: int = 0,
@@ -183,21 +208,30 @@ class EquivalentControlNetwork:
         initial_hidden = [[rng.uniform(-initial_spread, initial_spread) for _ in range(n_inputs)]
                           for _ in range(n_hidden)]
         self.batch = batch
-        vehicles = () if batch is None else (batch,)
-        #: hidden weights Wz[j][i], (H, I) or (B, H, I): random, to break the symmetry between hidden units
-        self.hidden_weights = np.tile(np.array(initial_hidden), vehicles + (1, 1))
-        #: output weights Wy[j], (H,) or (B, H): zero, so the network starts knowing nothing (U_eq_hat = 0)
-        self.output_weights = np.zeros(vehicles + (n_hidden,))
-        #: anchors W0 of the leakage: the initial weights
-        self._hidden_anchor, self._output_anchor = self.hidden_weights.copy(), self.output_weights.copy()
+        self.n_inputs, self.n_hidden = n_inputs, n_hidden
+        # hidden weights Wz[j][i], (H, I) or (B, H, I): random, to break the symmetry between hidden units;
+        # output weights Wy[j], (H,) or (B, H): zero, so the network starts knowing nothing (U_eq_hat = 0);
+        # their anchors W0 (of the leakage): the initial weights
+        if batch is None:   # every array a view of the store, zeros at first
+            self.bind(np.zeros(network_store_size(n_inputs, n_hidden)))
+            self.hidden_weights[:] = self._hidden_anchor[:] = initial_hidden
+        else:
+            self.hidden_weights = np.tile(np.array(initial_hidden), (batch, 1, 1))
+            self.output_weights = np.zeros((batch, n_hidden))
+            self._hidden_anchor, self._output_anchor = self.hidden_weights.copy(), self.output_weights.copy()
+            self._inputs, self._hidden, self._output = np.zeros((batch, n_inputs)), np.zeros((batch, n_hidden)), \
+                np.zeros(batch)
         #: (learning rate, K_eq, leakage, e-modification?, weight limit, adaptation-rate bound): the learning
         #: step's constants, in :func:`learning_step`'s order (a network's constants are fixed when it is built;
         #: a retune builds a new one)
         self.kernel_constants = (self.learning_rate, self.output_gain, self.leakage, self.modification == 'e',
                                  self.weight_limit, self.max_rate)
-        self._inputs = (0.0,) * n_inputs if batch is None else np.zeros((batch, n_inputs))
-        self._hidden = np.zeros(vehicles + (n_hidden,))
-        self._output = 0.0 if batch is None else np.zeros(batch)
+
+    def bind(self, store: np.ndarray) -> None:
+        """Make ``store`` (of :func:`network_store_size` floats, holding this network's values) its store."""
+        self.store = store
+        (_, self._hidden, self.output_weights, self._output_anchor, self.hidden_weights,
+         self._hidden_anchor) = network_views(store, self.n_inputs, self.n_hidden)
 
     def forward(self, inputs: Sequence) -> float:
         """U_eq_hat for input vector Z (eqs. 4 and the layer sums); remembers activations for learn().

@@ -175,13 +175,29 @@ def _compose(derivatives: tuple, phase: tuple) -> tuple:
             f4 * t1 ** 4 + 6.0 * f3 * t1 ** 2 * t2 + f2 * (3.0 * t2 ** 2 + 4.0 * t1 * t3) + f1 * t4)
 
 
+def _ramped_phase(t: float, rate: float, ramp: float, duration: float) -> tuple:
+    """The phase theta [rad] of a periodic path and its first four time derivatives at t [s]: the rate
+    dtheta/dt rises from rest to ``rate`` w [rad/s] over ``ramp`` T [s] by a minimum-jerk profile
+    (w s(t / T), s the quintic blend), then theta = w (t - T / 2); after ``duration`` [s] the phase holds."""
+    held = t > duration
+    t = min(max(t, 0.0), duration)
+    if t >= ramp:
+        phase = (rate * (t - 0.5 * ramp), rate, 0.0, 0.0, 0.0)
+    else:
+        tau = t / ramp
+        s, ds, dds, d3s, _ = _quintic_blend(tau)
+        integral = tau ** 4 * (2.5 + tau * (-3.0 + tau))     # int_0^tau s
+        phase = (rate * ramp * integral, rate * s, rate * ds / ramp, rate * dds / ramp ** 2, rate * d3s / ramp ** 3)
+    return (phase[0], 0.0, 0.0, 0.0, 0.0) if held else phase
+
+
 @dataclass(frozen=True)
 class Lemniscate:
     """An aggressive figure-eight (lemniscate of Gerono) at constant height and heading.
 
     x_d = a sin(theta), y_d = (a / 2) sin(2 theta), z_d = height, psi_d = yaw, with the phase theta(t)
     accelerating from rest to the rate w over ``ramp_time`` T by a minimum-jerk profile of the rate
-    (dtheta/dt = w s(t / T), s the quintic blend), then theta = w (t - T / 2). Position, velocity,
+    (:func:`_ramped_phase`), then theta = w (t - T / 2). Position, velocity,
     acceleration, jerk and snap are analytic (chain rule through the phase). Defaults: a = 2 m,
     w = 1 rad/s: peak speed a w sqrt(2) = 2.83 m/s (at the crossing), peak acceleration 2 a w^2
     = 4 m/s^2 on y. The vehicle starts at rest on the ground below (0, 0, height).
@@ -194,24 +210,46 @@ class Lemniscate:
     ramp_time: float = 4.0      #: T [s]
     duration: float = 40.0      #: [s]
 
-    def phase(self, t: float) -> tuple:
-        """theta [rad] and its first four time derivatives at t [s] (0 <= t)."""
-        w, ramp = self.rate, self.ramp_time
-        if t >= ramp:
-            return (w * (t - 0.5 * ramp), w, 0.0, 0.0, 0.0)
-        tau = max(t, 0.0) / ramp
-        s, ds, dds, d3s, _ = _quintic_blend(tau)
-        integral = tau ** 4 * (2.5 + tau * (-3.0 + tau))     # int_0^tau s
-        return (w * ramp * integral, w * s, w * ds / ramp, w * dds / ramp ** 2, w * d3s / ramp ** 3)
-
     def sample(self, t: float) -> ReferenceSample:
-        phase = self.phase(min(t, self.duration))
-        if t > self.duration:
-            phase = (phase[0], 0.0, 0.0, 0.0, 0.0)
+        phase = _ramped_phase(t, self.rate, self.ramp_time, self.duration)
         a, theta = self.amplitude, phase[0]
         sin1, cos1, sin2, cos2 = math.sin(theta), math.cos(theta), math.sin(2.0 * theta), math.cos(2.0 * theta)
         x = _compose((a * sin1, a * cos1, -a * sin1, -a * cos1, a * sin1), phase)
         y = _compose((0.5 * a * sin2, a * cos2, -2.0 * a * sin2, -4.0 * a * cos2, 8.0 * a * sin2), phase)
+        return ReferenceSample(
+            position=(x[0], y[0], self.height), velocity=(x[1], y[1], 0.0), acceleration=(x[2], y[2], 0.0),
+            yaw=self.yaw, jerk=(x[3], y[3], 0.0), snap=(x[4], y[4], 0.0))
+
+    @property
+    def initial_state(self) -> list[float]:
+        return _rest_state_below(self.sample(0.0))
+
+
+@dataclass(frozen=True)
+class Circle:
+    """A fast horizontal circle at constant height and heading (the ``circle-fast`` scenario, issue 28).
+
+    x_d = R cos(theta), y_d = R sin(theta), z_d = height, psi_d = yaw, with the phase theta(t) of
+    :func:`_ramped_phase` (from rest to the rate w over ``ramp_time``). Defaults: R = 2 m,
+    w = 2 pi 0.2 rad/s (one lap in 5 s): speed R w = 2.51 m/s and centripetal acceleration R w^2 = 3.16 m/s^2
+    once the ramp is over, the circle of RotorPy's benchmark on which issue 28 saw a roll/pitch limit cycle
+    (2.5 m/s). The heading stays at ``yaw`` (0: the nose points along world x), so every yaw error is
+    a disturbance of the attitude loop. The vehicle starts at rest on the ground below (R, 0, height).
+    """
+
+    radius: float = 2.0                       #: R [m]
+    rate: float = 2.0 * math.pi * 0.2         #: w [rad/s]
+    height: float = 1.0                       #: [m]
+    yaw: float = 0.0                          #: [rad]
+    ramp_time: float = 4.0                    #: T [s]
+    duration: float = 30.0                    #: [s]
+
+    def sample(self, t: float) -> ReferenceSample:
+        phase = _ramped_phase(t, self.rate, self.ramp_time, self.duration)
+        r, theta = self.radius, phase[0]
+        sin, cos = math.sin(theta), math.cos(theta)
+        x = _compose((r * cos, -r * sin, -r * cos, r * sin, r * cos), phase)
+        y = _compose((r * sin, r * cos, -r * sin, -r * cos, r * sin), phase)
         return ReferenceSample(
             position=(x[0], y[0], self.height), velocity=(x[1], y[1], 0.0), acceleration=(x[2], y[2], 0.0),
             yaw=self.yaw, jerk=(x[3], y[3], 0.0), snap=(x[4], y[4], 0.0))
@@ -245,7 +283,8 @@ class Shifted:
         return state
 
 
-SCENARIOS = {'paper': Helix, 'hover': Hover, 'steps': Steps, 'waypoints': Waypoints, 'lemniscate': Lemniscate}
+SCENARIOS = {'paper': Helix, 'hover': Hover, 'steps': Steps, 'waypoints': Waypoints, 'lemniscate': Lemniscate,
+             'circle-fast': Circle}
 
 
 def make_scenario(name: str, duration: float | None = None, offset: Vec3 = (0.0, 0.0, 0.0)):

@@ -66,13 +66,19 @@ def _carry_state(old, new, where: str) -> None:
     if type(old) is not type(new):
         raise ParameterError(f'{where}: the new gains change its structure ({type(old).__name__} -> '
                              f'{type(new).__name__}); restart the controller')
+    for name in type(old).STATE:   # read and written as attributes: a single vehicle's may live in its store
+        value, fresh = getattr(old, name), getattr(new, name)
+        if None not in (_shape(value), _shape(fresh)) and _shape(value) != _shape(fresh):
+            raise ParameterError(f'{where}.{name}: the new gains change its size; restart the controller')
+        if isinstance(fresh, np.ndarray) and isinstance(value, np.ndarray):
+            fresh[...] = value   # in place: the array may be a view of the new part's store (kernel_state)
+        else:
+            setattr(new, name, value)
     for name, value in vars(old).items():
         fresh = vars(new)[name]
         if name in type(old).STATE:
-            if None not in (_shape(value), _shape(fresh)) and _shape(value) != _shape(fresh):
-                raise ParameterError(f'{where}.{name}: the new gains change its size; restart the controller')
-            setattr(new, name, value)
-        elif has_state(value):
+            continue
+        if has_state(value):
             _carry_state(value, fresh, f'{where}.{name}')
         elif isinstance(value, dict):
             for key, part in value.items():

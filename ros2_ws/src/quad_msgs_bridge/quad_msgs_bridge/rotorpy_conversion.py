@@ -123,16 +123,22 @@ def quad_params(params: VehicleParams, aero: dict, motor_time_constant_s: float)
             **aero}
 
 
-def motor_thrust_commands(forces: Sequence[float], params: VehicleParams) -> np.ndarray:
+def rotor_thrust_scales(params: VehicleParams) -> np.ndarray:
+    """Each rotor's thrust per unit of command (4,): its thrust factor times its efficiency, f_i (1 - l_i)."""
+    return np.array(params.rotor_thrust_factors, dtype=float) * (1.0 - np.array(params.rotor_efficiency_loss,
+                                                                                 dtype=float))
+
+
+def motor_thrust_commands(forces: Sequence[float], params: VehicleParams,
+                          scales: np.ndarray | None = None) -> np.ndarray:
     """RotorPy's ``cmd_motor_thrusts`` [N] (4,) for our commanded rotor thrusts F1..F4 [N].
 
     Each command is clipped to [F_min, F_max] (as our model does), then scaled by the rotor's thrust
     factor and efficiency (f_i (1 - l_i)): a weaker rotor gives less thrust and reaction torque for the
-    same command, as in our model."""
+    same command, as in our model. ``scales``: :func:`rotor_thrust_scales` of ``params``, when the caller
+    keeps it (the plant does, once per vehicle)."""
     clipped = np.clip(np.asarray(forces, dtype=float), params.F_min, params.F_max)
-    gains = np.array(params.rotor_thrust_factors, dtype=float) * (1.0 - np.array(params.rotor_efficiency_loss,
-                                                                                   dtype=float))
-    return clipped * gains
+    return clipped * (rotor_thrust_scales(params) if scales is None else scales)
 
 
 def rotor_speeds_of(thrusts: np.ndarray, k_eta: float) -> np.ndarray:

@@ -136,13 +136,26 @@ def _stage(s, h, k):
 @njit(cache=True, inline='always')
 def _rk4_step(c, table, t, s, forces, dt, air, windy):
     """One vehicle's state (12 floats) after one RK4 step of dt [s] from time t [s] (see QuadrotorModel.step)."""
+    return _rk4_step_disturbed(c, _stage_disturbances(table, t, dt), s, forces, dt, air, windy)
+
+
+@njit(cache=True, inline='always')
+def _stage_disturbances(table, t, dt):
+    """The disturbances (:func:`_disturbance`) at the RK4 stage times t, t + dt/2 and t + dt [s]."""
+    return _disturbance(table, t), _disturbance(table, t + 0.5 * dt), _disturbance(table, t + dt)
+
+
+@njit(cache=True, inline='always')
+def _rk4_step_disturbed(c, disturbances, s, forces, dt, air, windy):
+    """:func:`_rk4_step` with the disturbances at its stage times given (:func:`_stage_disturbances`: the same for
+    every vehicle of a batch, so a batch evaluates them once per step)."""
+    start, middle, end = disturbances
     controls = _controls(c, forces)
     half = 0.5 * dt
-    middle = _disturbance(table, t + half)
-    k1 = _derivative(c, s, controls, _disturbance(table, t), air, windy)
+    k1 = _derivative(c, s, controls, start, air, windy)
     k2 = _derivative(c, _stage(s, half, k1), controls, middle, air, windy)
     k3 = _derivative(c, _stage(s, half, k2), controls, middle, air, windy)
-    k4 = _derivative(c, _stage(s, dt, k3), controls, _disturbance(table, t + dt), air, windy)
+    k4 = _derivative(c, _stage(s, dt, k3), controls, end, air, windy)
     sixth = dt / 6.0
     new = (s[0] + sixth * (k1[0] + 2.0 * (k2[0] + k3[0]) + k4[0]),
            s[1] + sixth * (k1[1] + 2.0 * (k2[1] + k3[1]) + k4[1]),
@@ -183,13 +196,14 @@ def _rk4_batch(c, table, t, states, forces, dt, air, windy):
     ``windy``); ``c`` one row of constants per vehicle, or one row shared by all. Returns 12 new arrays."""
     count = states[0].shape[0]
     shared = c.shape[0] == 1
+    disturbances = _stage_disturbances(table, t, dt)
     new = np.empty((STATE_SIZE, count))
     for b in range(count):
         s = (states[0][b], states[1][b], states[2][b], states[3][b], states[4][b], states[5][b],
              states[6][b], states[7][b], states[8][b], states[9][b], states[10][b], states[11][b])
         vehicle_air = (air[0][b], air[1][b], air[2][b])
-        result = _rk4_step(c[0] if shared else c[b], table, t, s, (forces[0][b], forces[1][b], forces[2][b],
-                                                                    forces[3][b]), dt, vehicle_air, windy)
+        result = _rk4_step_disturbed(c[0] if shared else c[b], disturbances, s,
+                                     (forces[0][b], forces[1][b], forces[2][b], forces[3][b]), dt, vehicle_air, windy)
         for i in range(STATE_SIZE):
             new[i, b] = result[i]
     return new
@@ -203,6 +217,14 @@ class QuadrotorModel:
         self.disturbances = disturbances
         self._constants = vehicle_constants(params)
         self._table = disturbance_table(disturbances)
+        self._still = None
+
+    def _still_air(self, count: int) -> tuple:
+        """Three zero arrays of ``count`` elements: the air velocity a batch step is handed without wind (the
+        kernel does not read it then), made once rather than at every step."""
+        if self._still is None or self._still[0].shape[0] != count:
+            self._still = _arrays((0.0, 0.0, 0.0), count)
+        return self._still
 
     def with_vehicle(self, params: VehicleParams) -> 'QuadrotorModel':
         """The same model flying ``params`` from now on (a payload, a rotor loss: the simulator's vehicle changes)."""
@@ -234,9 +256,9 @@ class QuadrotorModel:
         windy = air_velocity is not None
         if isinstance(s[0], np.ndarray):
             count = s[0].shape[0]
-            air = air_velocity if windy else (0.0, 0.0, 0.0)
+            air = _arrays(air_velocity, count) if windy else self._still_air(count)
             return list(_rk4_batch(self._constants, self._table, float(t), _arrays(s, count), _arrays(forces, count),
-                                   float(dt), _arrays(air, count), windy))
+                                   float(dt), air, windy))
         return list(_step_one(self._constants, self._table, t, _floats(s, STATE_SIZE), _floats(forces, 4), dt,
                               _floats(air_velocity, 3) if windy else (0.0, 0.0, 0.0), windy))
 

@@ -26,7 +26,8 @@ from typing import Sequence
 import numpy as np
 
 from quad_msgs_bridge.rotorpy_conversion import (ROTORPY_MOTOR_TIME_CONSTANT, aero_coefficients, motor_thrust_commands,
-                                                 quad_params, rotor_speeds_of, rotorpy_state, state_from_rotorpy)
+                                                 quad_params, rotor_speeds_of, rotor_thrust_scales, rotorpy_state,
+                                                 state_from_rotorpy)
 from quad_msgs_bridge.state import STATE_SIZE
 from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams, check_number
 
@@ -59,39 +60,50 @@ def _batch_size(params: VehicleParams) -> int | None:
     return sizes.pop() if sizes else None
 
 
+def _disturbed(multirotor_class, disturbances: Disturbances):
+    """RotorPy's vehicle class plus the section IV disturbance wrench at time ``start`` + t (RotorPy's own class
+    when the disturbances are off). A(t) = bias + amplitude sin(omega t) of the six channels is one numpy
+    expression: the integrator asks for it 7 times per step."""
+    if not disturbances.enabled:
+        return multirotor_class
+    channels = [disturbances.A_x, disturbances.A_y, disturbances.A_z, disturbances.A_phi, disturbances.A_theta,
+                disturbances.A_psi]
+    bias, amplitude, omega = (np.array([getattr(c, name) for c in channels]) for name in ('bias', 'amplitude', 'omega'))
+
+    class DisturbedMultirotor(multirotor_class):
+        start = 0.0
+
+        def _s_dot_fn(self, t, s, cmd_rotor_speeds):
+            s_dot = super()._s_dot_fn(t, s, cmd_rotor_speeds)
+            a = bias + amplitude * np.sin(omega * (self.start + t))
+            s_dot[3:6] += a[:3] / self.mass
+            s_dot[10:13] += self.inv_inertia @ a[3:]
+            return s_dot
+
+    return DisturbedMultirotor
+
+
 class _Vehicle:
     """One RotorPy vehicle: its ``Multirotor`` (with the section IV disturbances added) and its rotor speeds."""
 
     def __init__(self, params: VehicleParams, disturbances: Disturbances, aero: bool, motor_time_constant_s: float,
                  rotor_speeds: np.ndarray | None = None):
-        multirotor_class = import_multirotor()
-
-        class DisturbedMultirotor(multirotor_class):
-            """RotorPy's vehicle plus the section IV disturbance wrench at time start + t."""
-            start = 0.0
-
-            def _s_dot_fn(self, t, s, cmd_rotor_speeds):
-                s_dot = super()._s_dot_fn(t, s, cmd_rotor_speeds)
-                a = disturbances.at(self.start + t)
-                s_dot[3:6] += np.array(a[:3]) / self.mass
-                s_dot[10:13] += self.inv_inertia @ np.array(a[3:])
-                return s_dot
-
         self.params = params
+        self.thrust_scales = rotor_thrust_scales(params)
         self.instant_motors = motor_time_constant_s == 0.0
         self.quad = quad_params(params, aero_coefficients(params), motor_time_constant_s)
-        self.multirotor = DisturbedMultirotor(self.quad, control_abstraction='cmd_motor_thrusts', aero=aero,
-                                              enable_ground=False)
+        self.multirotor = _disturbed(import_multirotor(), disturbances)(
+            self.quad, control_abstraction='cmd_motor_thrusts', aero=aero, enable_ground=False)
         self.rotor_speeds = (np.full(4, self.quad['rotor_speed_min']) if rotor_speeds is None
                              else np.array(rotor_speeds, dtype=float))
 
     def step(self, t: float, s: Sequence[float], forces: Sequence[float], dt: float,
              air_velocity: Sequence[float] | None) -> list[float]:
-        thrusts = motor_thrust_commands(forces, self.params)
+        thrusts = motor_thrust_commands(forces, self.params, self.thrust_scales)
         if self.instant_motors:
             self.rotor_speeds = np.clip(rotor_speeds_of(thrusts, self.quad['k_eta']), self.quad['rotor_speed_min'],
                                         self.quad['rotor_speed_max'])
-        self.multirotor.start = t
+        self.multirotor.start = t   # (an attribute of no use to RotorPy's own class, when the disturbances are off)
         # RotorPy's integrator (RK45, its tolerances) trying the whole step first: solve_ivp's own first guess
         # is tiny near an equilibrium (hover: 6 steps, 38 evaluations per 1 ms step instead of 1 step, 6)
         self.multirotor.integrator_kwargs = {'method': 'RK45', 'first_step': dt}
