@@ -441,17 +441,21 @@ def costs(settings: Settings, tune_root: Path | None, flights: int) -> dict[str,
 #: 1 kHz physics: bench/conditions_table.py's run of 2026-12-04 (6 kinds: 24 flights of 20 s at 1 kHz and about
 #: 120 delay-margin flights of 30 s at 4 kHz in 11 min on one shared core)
 EMBEDDED_4KHZ_COST, EMBEDDED_1KHZ_COST = 0.15, 0.04
+#: [s] wall time a campaign costs beyond its flights (workers start, kernels load, files): a stress try of 4
+#: flights of 7 s took about 10 s in the validation run of 2026-12-04 on the shared machine
+CAMPAIGN_OVERHEAD_S = 8.0
 
 
 def plan(settings: Settings, cost: dict[str, float]) -> list[str]:
     """The run's parts with their flights and estimated wall time: a campaign flight's cost scales with its
-    length; the nominal, noise and delay-margin flights are single embedded flights (EMBEDDED_*_COST), run
+    length, and each campaign costs CAMPAIGN_OVERHEAD_S more; the nominal, noise and delay-margin flights are single embedded flights (EMBEDDED_*_COST), run
     ``--workers`` at a time."""
     s = settings
     per_second = {kind: c / s.duration for kind, c in cost.items()}
-    heldout = sum(len(s.seeds) * s.flights * s.duration * per_second[k] for k in s.kinds)
+    heldout = sum(len(s.seeds) * (s.flights * s.duration * per_second[k] + CAMPAIGN_OVERHEAD_S) for k in s.kinds)
     tries = sum(stress_tries(d) for d in s.disturbances)
-    stress = sum(tries * s.stress_flights * s.stress_duration * per_second[k] for k in s.kinds)
+    stress = sum(tries * (s.stress_flights * s.stress_duration * per_second[k] + CAMPAIGN_OVERHEAD_S)
+                 for k in s.kinds)
     nominal = len(s.kinds) * 2 * s.nominal_duration * EMBEDDED_1KHZ_COST / jobs(s)
     margin = len(s.kinds) * MARGIN_FLIGHTS * s.margin_duration * EMBEDDED_4KHZ_COST / jobs(s)
     rows = [('held out', f'{len(s.kinds)} kinds x {len(s.seeds)} seeds x {s.flights} flights of {s.duration:g} s',
