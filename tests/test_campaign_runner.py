@@ -240,7 +240,7 @@ def test_planning_is_lazy_a_billion_flights_plan_their_first_batch_alone():
     assert second.flights == (4, 5, 6, 7)
     assert flights_to_fly(spec, set()) == 2_000_000_000
     default = next(plan_jobs(spec, set(), RunOptions(), workers=2))
-    assert len(default.flights) == 500       # the default batch size's cap
+    assert len(default.flights) == 1000      # the default batch size's cap
 
 
 def test_planning_skips_the_flown_pairs_in_batches_of_the_batch_size():

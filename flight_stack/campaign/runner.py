@@ -41,7 +41,7 @@ from .spec import CampaignSpec
 
 SPEC_FILE = 'spec.yaml'
 LOCK_FILE = '.campaign.lock'
-MAX_BATCH_SIZE = 500            #: the default batch size's cap (flights stepped together)
+MAX_BATCH_SIZE = 1000           #: the default batch size's cap (flights stepped together; what an interruption may lose per worker)
 #: batches handed to the workers ahead of the ones flying, per worker (a bound on what waits in memory)
 QUEUED_PER_WORKER = 2
 
@@ -49,7 +49,7 @@ QUEUED_PER_WORKER = 2
 @dataclass(frozen=True)
 class RunOptions:
     workers: int | None = None          #: local processes (default: every core)
-    batch_size: int | None = None       #: flights per batch (default: an even share per worker, at most 500)
+    batch_size: int | None = None       #: flights per batch (default: an even share per worker, at most 1000)
     scheduler: str | None = None        #: Dask scheduler address, e.g. tcp://127.0.0.1:8786
     resume: bool = False
     progress: bool = True
