@@ -39,6 +39,23 @@ def _z(section: str, gain: str, low: float, high: float, unit: str) -> Dimension
     return Dimension(f'z.{gain}', (f'{section}.axes.z.{gain}',), low, high, unit)
 
 
+#: the ranges of a PID-shaped position loop (pid, se3, l1-se3, indi): role -> (x, y range), (z range), unit
+_POSITION_RANGES = {
+    'error': ((2.0, 80.0), (10.0, 200.0), '1/s^2'),
+    'integral': ((1.0, 200.0), (5.0, 200.0), '1/s^3'),
+    'rate': ((1.0, 20.0), (3.0, 40.0), '1/s'),
+}
+
+
+def _position_loop(section: str, error: str, integral: str | None, rate: str) -> tuple[Dimension, ...]:
+    """The x, y dimensions, then the z ones, of a PID-shaped position loop whose gains are named ``error``,
+    ``integral`` (None: it has none) and ``rate`` in ``section``; every such law searches the same ranges."""
+    roles = [(role, gain) for role, gain in (('error', error), ('integral', integral), ('rate', rate)) if gain]
+    xy = tuple(_xy(section, gain, *_POSITION_RANGES[role][0], _POSITION_RANGES[role][2]) for role, gain in roles)
+    z = tuple(_z(section, gain, *_POSITION_RANGES[role][1], _POSITION_RANGES[role][2]) for role, gain in roles)
+    return xy + z
+
+
 #: controller kind -> its search space (units as the gains file states them)
 SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
     'nnit2fsmc': (
@@ -49,22 +66,8 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
         _z('nnit2fsmc', 'fuzzy_gain', 4.0, 80.0, 'm/s^2'),
         _z('nnit2fsmc', 'learning_rate', 0.01, 1.0, '1/s per (m/s^2)^2'),
     ),
-    'pid': (
-        _xy('pid', 'kp', 2.0, 80.0, '1/s^2'),
-        _xy('pid', 'ki', 1.0, 200.0, '1/s^3'),
-        _xy('pid', 'kd', 1.0, 20.0, '1/s'),
-        _z('pid', 'kp', 10.0, 200.0, '1/s^2'),
-        _z('pid', 'ki', 5.0, 200.0, '1/s^3'),
-        _z('pid', 'kd', 3.0, 40.0, '1/s'),
-    ),
-    'se3': (
-        _xy('se3', 'k_error', 2.0, 80.0, '1/s^2'),
-        _xy('se3', 'k_integral', 1.0, 200.0, '1/s^3'),
-        _xy('se3', 'k_rate', 1.0, 20.0, '1/s'),
-        _z('se3', 'k_error', 10.0, 200.0, '1/s^2'),
-        _z('se3', 'k_integral', 5.0, 200.0, '1/s^3'),
-        _z('se3', 'k_rate', 3.0, 40.0, '1/s'),
-    ),
+    'pid': _position_loop('pid', 'kp', 'ki', 'kd'),
+    'se3': _position_loop('se3', 'k_error', 'k_integral', 'k_rate'),
     'smc-integral': (
         _xy('smc_integral', 'slope', 1.0, 20.0, '1/s (boundary-layer slope)'),
         _xy('smc_integral', 'integral_gain', 0.2, 50.0, '1/s^2'),
@@ -73,19 +76,13 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
         _z('smc_integral', 'integral_gain', 0.2, 50.0, '1/s^2'),
         _z('smc_integral', 'switching_gain', 0.5, 20.0, 'm/s^2'),
     ),
-    'l1-se3': (    # its own se3 law (l1_se3.axes, apart from se3's), and its L1 translational loop
-        _xy('l1_se3', 'k_error', 2.0, 80.0, '1/s^2'),
-        _xy('l1_se3', 'k_integral', 1.0, 200.0, '1/s^3'),
-        _xy('l1_se3', 'k_rate', 1.0, 20.0, '1/s'),
-        _z('l1_se3', 'k_error', 10.0, 200.0, '1/s^2'),
+    'l1-se3': (    # its own se3 law (l1_se3.axes, apart from se3's): x, y error, integral, rate and z error; its L1 loop
+        *_position_loop('l1_se3', 'k_error', 'k_integral', 'k_rate')[:4],
         Dimension('l1.predictor_pole_translation', ('l1_se3.predictor_pole_translation',), 0.5, 50.0, '1/s'),
         Dimension('l1.cutoff_translation_hz', ('l1_se3.cutoff_translation_hz',), 0.5, 50.0, 'Hz'),
     ),
     'indi': (
-        _xy('indi', 'k_error', 2.0, 80.0, '1/s^2'),
-        _xy('indi', 'k_rate', 1.0, 20.0, '1/s'),
-        _z('indi', 'k_error', 10.0, 200.0, '1/s^2'),
-        _z('indi', 'k_rate', 3.0, 40.0, '1/s'),
+        *_position_loop('indi', 'k_error', None, 'k_rate'),
         Dimension('indi.effectiveness_rate', ('indi.effectiveness_rate',), 0.005, 0.5, '- (normalised LMS step)'),
         # its modelled rotor response, in place of its acceleration filter's cutoff (every kind searches six
         # dimensions): the example campaign's 30 ms motor lag with 4 ms of delay crashes every flight of the
