@@ -218,6 +218,8 @@ class _LocalPool:
         for _ in range(workers):     # one process starts per task submitted while none is idle
             self.executor.submit(_started)
         self.processes = list(self.executor._processes.values())
+        #: the executor's thread that reaps the workers once the pool is shut down (shutdown forgets it)
+        self.manager = self.executor._executor_manager_thread
 
     def submit(self, job):
         return self.executor.submit(fly_batch, job)
@@ -236,7 +238,10 @@ class _LocalPool:
         self.executor.shutdown(wait=False, cancel_futures=cancel)
 
     def join(self) -> None:
-        """Wait for the closed pool's workers to exit."""
+        """Wait for the closed pool's workers to exit. The executor's manager thread reaps them: waiting on a
+        worker beside it races it for the exit status (the loser's join returns with no exit code yet), so
+        this waits for that thread first."""
+        self.manager.join()
         for process in self.processes:
             process.join()
 
