@@ -116,9 +116,9 @@ def test_indi_rejects_a_moment_step_as_its_filter_predicts():
         assert abs(fraction[steps]) <= 0.05 + 0.01 and abs(fraction[steps - 2]) > 0.05
 
 
-#: the LMS step of the effectiveness test: 4 times the packaged one, which is kept small so that campaign sensor
-#: noise does not drive the estimate (docs/ADAPTIVE_BASELINES.md); the law is the same
-ADAPTATION_RATE = 0.2
+#: the LMS step of the effectiveness test: 20 times the packaged one, which is kept small so that campaign sensor
+#: noise does not drive the estimate (docs/ADAPTIVE_BASELINES.md); the law is the same (stable for mu in (0, 2))
+ADAPTATION_RATE = 1.0
 
 
 def indi_gains_with(**indi):
@@ -128,11 +128,13 @@ def indi_gains_with(**indi):
     return gains
 
 
-def fly_indi_and_read_effectiveness(thrust_factor: float, duration: float = 4.0):
-    """The effectiveness estimate after ``duration`` [s] of the paper helix flown by indi on a vehicle whose
-    rotors give ``thrust_factor`` times the thrust the nominal model expects (Kp off)."""
+def fly_indi_and_read_effectiveness(thrust_factor: float, duration: float = 12.0):
+    """The effectiveness estimate after ``duration`` [s] of the position steps flown by indi on a vehicle whose
+    rotors give ``thrust_factor`` times the thrust the nominal model expects (Kp off). Steps, not the paper
+    helix: the normalised LMS learns only from angular accelerations well above its threshold (5 rad/s^2), which
+    the smooth helix gives at take-off alone."""
     true = dataclasses.replace(VEHICLE, rotor_thrust_factors=(thrust_factor,) * 4)
-    trajectory = make_scenario('paper', duration)
+    trajectory = make_scenario('steps', duration)
     controller = build_controller('indi', VEHICLE, indi_gains_with(effectiveness_rate=ADAPTATION_RATE))
     simulator = Simulator(QuadrotorModel(true, DISTURBANCES), DT, trajectory.initial_state)
     loop = ClosedLoop(controller, simulator, setpoint_path(published_path(trajectory, 50.0)).sample, 1,
@@ -158,10 +160,12 @@ def test_indi_effectiveness_converges_on_a_vehicle_whose_rotor_coefficient_is_of
 
 # ---------------------------------------------------------------- the same take-off for every kind
 @pytest.mark.parametrize('kind', CONTROLLERS)
-def test_every_kind_lifts_off_level_and_holds_its_horizontal_adaptation_on_the_ground(kind):
+def test_every_kind_holds_its_horizontal_adaptation_on_the_ground_and_acts_on_the_error(kind):
     """common.takeoff_height is the take-off hold of every kind: on the ground (z below it) with a reference
-    2 m to the side, the desired roll and pitch are 0 and nothing the x, y or attitude laws adapt or integrate
-    moves; above it the same error tilts the vehicle. Equal kinds, equal pipelines."""
+    2 m to the side, nothing the x, y or attitude laws adapt or integrate moves, and the laws act on the error
+    all the same (the desired tilt is not held at 0: a level lift-off handed every kind a large error at
+    lift-off, docs/ADAPTIVE_BASELINES.md); above it the same error tilts the vehicle. Equal kinds, equal
+    pipelines."""
     assert GAINS['common']['takeoff_height'] > 0.0
     reference = hold((2.0, -1.0, 1.0))
     controller = build_controller(kind, VEHICLE, GAINS)
@@ -170,11 +174,17 @@ def test_every_kind_lifts_off_level_and_holds_its_horizontal_adaptation_on_the_g
     for k in range(20):
         out = controller.update(k * DT, ground, reference)
         controller.adapt()
-        assert out.attitude_reference[0] == 0.0 and out.attitude_reference[1] == 0.0
+    assert abs(out.attitude_reference[0]) > 0.01 and abs(out.attitude_reference[1]) > 0.01
     np.testing.assert_array_equal(held_state(controller), before)
     airborne = [0.0, 0.0, 2.0 * GAINS['common']['takeoff_height']] + [0.0] * 9
     out = controller.update(20 * DT, airborne, reference)
     assert abs(out.attitude_reference[0]) > 0.01 and abs(out.attitude_reference[1]) > 0.01
+
+
+def test_the_take_off_is_the_same_for_every_kind():
+    """One common key sets the take-off hold of every kind (issue 26: before, the NNIT2FSMC kinds alone had it)."""
+    heights = {build_controller(kind, VEHICLE, GAINS).takeoff_height for kind in CONTROLLERS}
+    assert heights == {GAINS['common']['takeoff_height']}
 
 
 def held_state(controller) -> np.ndarray:

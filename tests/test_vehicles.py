@@ -141,10 +141,10 @@ def test_every_kind_flies_every_shipped_vehicle(name, kind):
     """The packaged gains, the vehicle's own file (its section IV disturbances scaled to its mass and inertia):
     a hover flight takes off and holds still near the hover point, upright, with no failure. Near: within
     0.25 m, as `nnit2fsmc-nolearn` (no network learning) holds the paper's own vehicle 0.2 m low under the
-    section IV bias forces, and `smc-sat` (no integral action) within 0.1 m: during the level take-off hold
-    (common.takeoff_height, the same for every kind) the bias forces push the vehicle about 8 cm sideways, and
-    the paper-style sliding modes, whose switching gain is just above those bounds, take 12 s to come back
-    (`smc-sat` to the steady error its boundary layer leaves); every other kind ends within 3 cm of it here."""
+    section IV bias forces, and `smc-sat` (no integral action) within 0.1 m: the bias forces push the vehicle
+    sideways at take-off, and the paper-style sliding modes, whose switching gain is just above those bounds,
+    take up to 12 s to come back (`smc-sat` to the steady error its boundary layer leaves); every other kind
+    ends within 3 cm of it here."""
     paper_style_smc = kind in ('smc-sign', 'smc-sat')
     flight = fly(kind, 'hover', duration=12.0 if paper_style_smc else 8.0, vehicle=name)
     assert flight.summary.get('failure') is None

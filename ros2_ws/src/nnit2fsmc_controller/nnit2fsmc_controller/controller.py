@@ -72,7 +72,7 @@ AXES = ('x', 'y', 'z', 'phi', 'theta', 'psi')
 ATTITUDE_RATES = ('flatness', 'filter')   #: sources of the desired roll/pitch rates (module docstring)
 #: the subsystems whose networks learn only once airborne (``takeoff_height``): on the ground the vehicle can
 #: neither move horizontally nor tilt, so their errors teach nothing; z learns throughout (its network lifts the
-#: vehicle). Below that height the x, y laws' outputs are not used either: the vehicle lifts off level
+#: vehicle). Their laws act below that height all the same (no level lift-off: docs/ADAPTIVE_BASELINES.md)
 HELD_ON_GROUND = ('x', 'y', 'phi', 'theta', 'psi')
 
 
@@ -336,8 +336,6 @@ def cascade_step(store, law_constants, c, mixer, inputs):
     out_y = _law(1, store, law_constants, c, y - yd, vy - vyd, vyd, ayd, -c[_KFY] * vy / m, 1.0)
     out_z = _law(2, store, law_constants, c, z - zd, vz - vzd, vzd, azd, -g - c[_KFZ] * vz / m, cphi * ctheta / m)
     ax_cmd, ay_cmd = out_x[0], out_y[0]
-    if not airborne:
-        ax_cmd, ay_cmd = 0.0, 0.0
     limit = (c[_TILT], c[_TILT + 1], c[_TILT + 2])
     phi_d, theta_d = attitude_of_accelerations(ax_cmd, ay_cmd, psi, z, g, limit)
     filters, blend, dt = int(c[_FILTERS]), c[_BLEND], c[_DT]
@@ -388,9 +386,8 @@ class CascadedController:
 
         ``takeoff_height`` > 0 [m, world z; the ground is z = 0]: while a vehicle's (filtered) height is
         not above it, the networks and integrators of HELD_ON_GROUND hold (the laws' ``learning`` flag; the
-        sliding-mode laws have no state to hold) and the desired roll and pitch are 0 (the x, y laws' outputs are
-        replaced by a zero horizontal acceleration: level on the ground); 0: the laws act and learn
-        from the first update (paper).
+        sliding-mode laws have no state to hold); the laws act all the same. 0: the laws learn from the first
+        update (paper).
 
         ``max_tilt``, ``low_altitude_max_tilt`` [rad], ``low_altitude_height`` [m]: the tilt limit by
         (filtered) height, :class:`TiltLimit`. ``batch``: None for one vehicle, or the number of
@@ -468,8 +465,6 @@ class CascadedController:
         out_z = laws['z'].update(z - zd, vz - vzd, vzd, azd, -p.g - p.Kfz * vz / p.m, cphi * ctheta / p.m)
 
         ax_cmd, ay_cmd = out_x.value, out_y.value
-        if self.takeoff_height > 0.0:   # level on the ground: tilting cannot move it, and tips it over at lift-off
-            ax_cmd, ay_cmd = xp.where(airborne, ax_cmd, 0.0), xp.where(airborne, ay_cmd, 0.0)
         phi_d, theta_d = self.attitude_from_accelerations(ax_cmd, ay_cmd, psi, z)
         f = self._filters
         if self.attitude_rates == 'flatness':

@@ -370,7 +370,7 @@ GAIN_DESCRIPTIONS = {
                              'measurement stage of every controller kind (0: none, paper)',
     'velocity_filter_hz': 'cutoff of the first-order low-pass of the measured velocities [Hz], the measurement '
                           'stage of every controller kind (0: none, paper)',
-    'takeoff_height': 'height [m, ground at z = 0] below which every controller kind keeps the vehicle level and '
+    'takeoff_height': 'height [m, ground at z = 0] below which every controller kind '
                       'holds what it adapts or integrates on the x, y and attitude axes (networks, integrators, L1 '
                       'estimates, INDI increments) (0: off, paper)',
     'acceleration_feedforward': 'x, y: add the reference acceleration to the NN and fuzzy terms (false: paper)',

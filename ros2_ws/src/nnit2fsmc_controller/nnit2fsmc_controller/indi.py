@@ -53,7 +53,7 @@ does not model change slowly against the filter.
 
 Take-off: below ``takeoff_height`` the ground holds the vehicle (alpha_f = a_f = 0 whatever the
 command), which an increment would wind up; there the commands are the nominal inversions
-J alpha_d + Omega x J Omega and m (a_c + g e3) (level), the effectiveness does not adapt, and the
+J alpha_d + Omega x J Omega and m (a_c + g e3), the effectiveness does not adapt, and the
 filters follow what the rotors were commanded.
 """
 from __future__ import annotations

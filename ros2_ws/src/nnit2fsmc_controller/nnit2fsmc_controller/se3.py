@@ -33,8 +33,8 @@ Choices (docs/BASELINES.md):
 * The nominal model's drag terms (translational 5.6e-4 N s/m, rotational friction) are not fed
   forward: Lee et al. have none, and they are below 1e-3 of the weight on the paper flight.
 
-Take-off (``takeoff_height``, the hold every kind shares, docs/ADAPTIVE_BASELINES.md): below it the
-horizontal part of F_d is 0 (lift-off level) and I_x (x, y) and I_R hold.
+Take-off (``takeoff_height``, the hold every kind shares, docs/ADAPTIVE_BASELINES.md): below it I_x (x, y)
+and I_R hold; F_d is the law's.
 
 The adaptive kinds keep this structure and replace its parts (:mod:`.l1_adaptive`, :mod:`.indi`):
 :meth:`SE3Controller.desired_force` (F_d), :meth:`SE3Controller.moment` (M of the desired angular
@@ -189,8 +189,6 @@ class SE3Controller:
                              for a, e, de, i in zip(position_axes, ex, ev, self.position_integral))
         feedback = tuple(p.m * a for a in acceleration)
         force = self.desired_force(state, reference, acceleration, held)
-        if self.takeoff_height > 0.0:    # level on the ground: tilting cannot move it, and tips it over at lift-off
-            force[0], force[1] = xp.where(held, 0.0, force[0]), xp.where(held, 0.0, force[1])
         lift = xp.maximum(force[2], MIN_LIFT * p.m * p.g)
         horizontal = xp.hypot(force[0], force[1])
         allowed = lift * self.tilt_limit.tangent(z)
