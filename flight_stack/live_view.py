@@ -321,8 +321,7 @@ class LiveView:
     def __init__(self, server: LiveServer, params: VehicleParams, namespace: str = DEFAULT_NAMESPACE,
                  topics: Sequence[TopicSpec] = RECORDED_TOPICS):
         self.server = server
-        self._contract = FlightBag(LiveTopics(server, topics, namespace), params.d, namespace,
-                                   rotor_names=params.rotor_names)
+        self._contract = FlightBag(LiveTopics(server, topics, namespace), params, namespace)
         self._scene_channel = server.scene_channel(resolve(SCENE, namespace))
         self._scene = VehicleScene(params, namespace)
         self._next_scene = 0.0          # [s, wall, perf_counter]

@@ -4,8 +4,10 @@ import json
 import os
 import subprocess
 import sys
+import xml.etree.ElementTree as ElementTree
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from mcap.reader import make_reader
@@ -18,14 +20,18 @@ from nnit2fsmc_controller.factory import load_gains
 from quad_msgs_bridge.bag.reader import mcap_file
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, ODOM,
-                                       RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, resolve)
+                                       RECORDED_TOPICS, REFERENCE_PATH, ROBOT_DESCRIPTION, ROTOR_FORCES, SETPOINTS,
+                                       TF_STATIC, resolve)
 from quad_msgs_bridge.conversions import (diagnostics_from_msg, odometry_from_msg, path_msg, rosbags_kit,
                                           rotor_forces_from_msg, setpoints_msg)
 from quad_msgs_bridge.frames import quaternion_from_euler
+from quad_msgs_bridge.review.flight_from_bag import read_flight
 from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
+from quad_msgs_bridge.urdf import rotor_transforms_msg, vehicle_urdf
 
 TYPESTORE = jazzy_typestore()
-ONCE = (SETPOINTS, REFERENCE_PATH)          # recorded once, at the path start
+ONCE = (SETPOINTS, REFERENCE_PATH, ROBOT_DESCRIPTION, TF_STATIC)   # recorded once: the path at its start, the
+                                                                   # vehicle's description at the first step
 PER_STEP = tuple(t for t in RECORDED_TOPICS if t not in ONCE)
 
 
@@ -178,6 +184,53 @@ def test_mcap_reader_sees_the_ros2_profile_schemas_channels_and_values(flight):
         assert msg.header.frame_id == 'odom' and msg.child_frame_id == 'quad/base_link'
         assert (msg.twist.twist.angular.x, msg.twist.twist.angular.y, msg.twist.twist.angular.z) == \
             sample.angular_velocity
+
+
+def transform_values(transform) -> tuple:
+    """A geometry_msgs/TransformStamped as plain values: frames, stamp [s, ns], translation [m], rotation (xyzw)."""
+    t, r = transform.transform.translation, transform.transform.rotation
+    return (transform.header.frame_id, transform.child_frame_id, transform.header.stamp.sec,
+            transform.header.stamp.nanosec, t.x, t.y, t.z, r.x, r.y, r.z, r.w)
+
+
+def test_the_bag_describes_the_vehicle_once_at_the_first_step_latched(flight):
+    """robot_description (the URDF) and /tf_static (the rotor links), as the simulator publishes them, once each at
+    the flight's first stamp, read by mcap + mcap-ros2-support as ROS 2 messages; offered transient local, so
+    rosbag2 replays them latched; and the review still reads the bag."""
+    described = {}
+    with open(mcap_file(flight.bag), 'rb') as stream:
+        reader = make_reader(stream, validate_crcs=True, decoder_factories=[DecoderFactory()])
+        channels = {c.topic: c for c in reader.get_summary().channels.values()}
+        for _, channel, message, decoded in reader.iter_decoded_messages(
+                topics=['/quad/robot_description', '/tf_static']):
+            described.setdefault(channel.topic, []).append((message.log_time, decoded))
+    first_stamp = step_stamps(flight)[0]
+    [(log_time, description)] = described['/quad/robot_description']
+    assert log_time == first_stamp
+    assert description.data == vehicle_urdf(PARAMS, 'quad')
+    robot = ElementTree.fromstring(description.data)
+    rotors = [f'quad/rotor_{i}' for i in range(1, 5)]
+    assert [link.get('name') for link in robot.iter('link')] == ['quad/base_link', *rotors]
+    joints = {joint.find('child').get('link'): joint for joint in robot.iter('joint')}
+    assert sorted(joints) == rotors and {joint.get('type') for joint in joints.values()} == {'fixed'}
+    [(log_time, tf_static)] = described['/tf_static']
+    assert log_time == first_stamp
+    assert [transform_values(t) for t in tf_static.transforms] == \
+        [transform_values(t) for t in rotor_transforms_msg(rosbags_kit(), PARAMS, ['quad']).transforms]
+    assert [(t.header.frame_id, t.child_frame_id) for t in tf_static.transforms] == \
+        [('quad/base_link', rotor) for rotor in rotors]
+    assert [(t.transform.translation.x, t.transform.translation.y, t.transform.translation.z)
+            for t in tf_static.transforms] == [tuple(position) for position in PARAMS.rotor_positions]
+    topics = {entry['topic_metadata']['name']: entry['topic_metadata'] for entry in
+              yaml.safe_load((flight.bag / 'metadata.yaml').read_text())['rosbag2_bagfile_information'][
+                  'topics_with_message_count']}
+    for topic in ('/quad/robot_description', '/tf_static'):
+        for [qos] in (yaml.safe_load(channels[topic].metadata['offered_qos_profiles']),
+                      topics[topic]['offered_qos_profiles']):
+            assert (qos['durability'], qos['reliability'], qos['depth']) == ('transient_local', 'reliable', 1)
+    reviewed = read_flight(flight.bag)
+    assert np.array_equal(reviewed.record.time, flight.result.record.time)
+    assert np.array_equal(reviewed.record.position, flight.result.record.position)
 
 
 def test_metadata_yaml_is_a_rosbag2_jazzy_bag(flight):

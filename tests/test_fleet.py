@@ -68,23 +68,26 @@ def test_run_stack_refuses_a_bad_fleet_before_flying(arguments, message, tmp_pat
 
 
 PER_VEHICLE = ['odom', 'rotor_forces', 'setpoints', 'reference_path', 'control/wrench', 'control/reference',
-               'control/diagnostics']
+               'control/diagnostics', 'robot_description']
 
 
-def test_a_fleet_bag_has_each_vehicles_topics_and_one_clock_and_tf(tmp_path):
+def test_a_fleet_bag_has_each_vehicles_topics_and_one_clock_tf_and_tf_static(tmp_path):
     with BagWriter(tmp_path / 'bag', RECORDED_TOPICS, ['uav1', '/team/uav2']):
         pass
     with AnyReader([tmp_path / 'bag']) as reader:
         topics = sorted(c.topic for c in reader.connections)
     assert topics == sorted([f'/uav1/{name}' for name in PER_VEHICLE] + [f'/team/uav2/{name}' for name in PER_VEHICLE]
-                            + ['/clock', '/tf'])
+                            + ['/clock', '/tf', '/tf_static'])
 
 
 def test_rosbag2_qos_overrides_cover_every_vehicle():
     overrides = yaml.safe_load(rosbag2_qos_overrides(['uav1', 'uav2']))
     assert sorted(overrides) == sorted([f'/uav{k}/{name}' for k in (1, 2) for name in PER_VEHICLE]
-                                       + ['/clock', '/tf'])
+                                       + ['/clock', '/tf', '/tf_static'])
     assert overrides['/uav2/odom']['depth'] == 1000
     # /tf as tf2 publishes it (reliable, volatile), with the lockstep topics' history (contract.TF_QOS)
     assert (overrides['/tf']['reliability'], overrides['/tf']['durability'], overrides['/tf']['depth']) == \
         ('reliable', 'volatile', 1000)
+    # the vehicle's description latched, as the simulator offers it: `ros2 bag record` started late still gets it
+    for latched in ('/uav1/robot_description', '/tf_static'):
+        assert (overrides[latched]['durability'], overrides[latched]['depth']) == ('transient_local', 1)

@@ -13,6 +13,7 @@ from flight_stack.fleet import fleet_layout
 from nnit2fsmc_controller.factory import load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.writer import jazzy_typestore
+from quad_msgs_bridge.urdf import vehicle_urdf
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -51,7 +52,16 @@ def test_run_stack_flies_records_and_reviews_an_embedded_fleet(tmp_path):
         counts = {c.topic: c.msgcount for c in reader.connections}
         tf = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages()
               if c.topic == '/tf']
+        described = {c.topic: (t, reader.deserialize(raw, c.msgtype)) for c, t, raw in reader.messages()
+                     if c.topic in ('/uav1/robot_description', '/uav2/robot_description', '/tf_static')}
     assert counts['/clock'] == counts['/uav1/odom'] == counts['/uav2/odom'] == counts['/tf'] == 1000
+    # every vehicle's description once, at the first step: its URDF in its namespace, one /tf_static for all
+    assert counts['/uav1/robot_description'] == counts['/uav2/robot_description'] == counts['/tf_static'] == 1
+    assert {topic: t for topic, (t, _) in described.items()} == dict.fromkeys(described, 0) and len(described) == 3
+    for name in ('uav1', 'uav2'):
+        assert described[f'/{name}/robot_description'][1].data == vehicle_urdf(PARAMS, name)
+    assert [t.child_frame_id for t in described['/tf_static'][1].transforms] == \
+        [f'{name}/rotor_{i}' for name in ('uav1', 'uav2') for i in range(1, 5)]
     assert [t.child_frame_id for t in tf[-1].transforms] == ['uav1/base_link', 'uav2/base_link']
     uav1, uav2 = (t.transform.translation for t in tf[-1].transforms)
     assert abs(uav2.y - uav1.y - 3.0) < 1e-9 and abs(uav2.x - uav1.x) < 1e-9

@@ -36,7 +36,8 @@ CONTRACT = {'/quad/odom': 'nav_msgs/msg/Odometry', '/quad/rotor_forces': 'std_ms
             '/quad/reference_path': 'nav_msgs/msg/Path', '/quad/control/wrench': 'geometry_msgs/msg/WrenchStamped',
             '/quad/control/reference': 'geometry_msgs/msg/PoseStamped',
             '/quad/control/diagnostics': 'std_msgs/msg/Float64MultiArray', '/clock': 'rosgraph_msgs/msg/Clock',
-            '/tf': 'tf2_msgs/msg/TFMessage'}
+            '/tf': 'tf2_msgs/msg/TFMessage', '/quad/robot_description': 'std_msgs/msg/String',
+            '/tf_static': 'tf2_msgs/msg/TFMessage'}
 SCENE_TOPIC = '/quad/scene'
 TIMEOUT = 30.0
 
@@ -168,7 +169,8 @@ def messages(bag: Path) -> list[tuple[str, int, int, bytes]]:
 def test_the_bag_of_a_live_flight_equals_the_bag_without_live(live_flight):
     assert live_flight['plain_status'] == 0
     live, plain = messages(live_flight['bag']), messages(live_flight['plain_bag'])
-    assert len(live) == len(plain) == 7 * STEPS + 2    # 7 topics per step; setpoints and reference_path once
+    # 7 topics per step; setpoints, reference_path, robot_description and /tf_static once
+    assert len(live) == len(plain) == 7 * STEPS + 4
     assert live == plain
     counts = [{t['topic_metadata']['name']: t['message_count'] for t in read_metadata(bag)['topics_with_message_count']}
               for bag in (live_flight['bag'], live_flight['plain_bag'])]
@@ -205,7 +207,8 @@ def test_ctrl_c_closes_the_server_and_the_bag(tmp_path):
     recorded = messages(bag)
     counts = {t['topic_metadata']['name']: t['message_count'] for t in read_metadata(bag)['topics_with_message_count']}
     assert counts == {topic: sum(m[0] == topic for m in recorded) for topic in CONTRACT}
-    per_step = [n for topic, n in counts.items() if not topic.endswith(('setpoints', 'reference_path'))]
+    per_step = [n for topic, n in counts.items()
+                if not topic.endswith(('setpoints', 'reference_path', 'robot_description', '/tf_static'))]
     assert 0 < min(per_step) == max(per_step) < STEPS                     # stopped between two steps, mid-flight
 
 

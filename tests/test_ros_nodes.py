@@ -29,14 +29,16 @@ from quad_msgs_bridge.bag.reader import mcap_file
 from flight_stack.fleet import FleetVehicle, fleet_layout
 from flight_stack.processes import stop_all
 from quad_msgs_bridge.contract import (CONTROL_DIAGNOSTICS, CONTROL_REFERENCE, CONTROL_WRENCH, GOAL_POSE, LOCKSTEP,
-                                       ODOM, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, TF, resolve)
+                                       ODOM, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES, SETPOINTS, TF, TF_STATIC,
+                                       resolve)
 from quad_msgs_bridge.conversions import odometry_from_msg, odometry_msg, pose_stamped_msg, rclpy_kit, rotor_forces_msg
 from quad_msgs_bridge.state import odometry_from_state, state_from_odometry
 from nnit2fsmc_controller.factory import control_period, load_gains
 from nnit2fsmc_controller.trajectory import Hover, make_scenario
 
-#: the recorded topics a ROS flight carries here: /tf only where tf2_msgs is installed (the ROS 2 wheels lack it)
-FLOWN_TOPICS = [t for t in RECORDED_TOPICS if t is not TF or HAVE_TF2_MSGS]
+#: the recorded topics a ROS flight carries here: /tf and /tf_static only where tf2_msgs is installed (the ROS 2
+#: wheels lack it)
+FLOWN_TOPICS = [t for t in RECORDED_TOPICS if t not in (TF, TF_STATIC) or HAVE_TF2_MSGS]
 
 
 def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):

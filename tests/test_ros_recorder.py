@@ -65,7 +65,7 @@ def test_a_recorded_flight_holds_exactly_the_bytes_that_were_published(ros_node,
 
     namespace, duration = 'rawcheck', 2.0
     kit = rclpy_kit()
-    topics = [t for t in RECORDED_TOPICS if t.name != '/tf' or _installed('tf2_msgs')]
+    topics = [t for t in RECORDED_TOPICS if t.name not in ('/tf', '/tf_static') or _installed('tf2_msgs')]
     sent: dict[str, list] = {}
     decoded: dict[str, list] = {}
 
@@ -121,6 +121,9 @@ def test_a_recorded_flight_holds_exactly_the_bytes_that_were_published(ros_node,
     for name, topic in resolve_all(PER_STEP, ['/' + namespace]):
         assert len(in_bag[name]) == steps, name
     assert 'lost_messages' not in read_metadata(tmp_path / 'bag')['custom_data']
+    # the simulator's latched description of the vehicle: its one message, logged at the flight's start (sim time 0)
+    described = [f'/{namespace}/robot_description'] + (['/tf_static'] if '/tf_static' in sent else [])
+    assert [(len(in_bag[name]), in_bag[name][0].log_time) for name in described] == [(1, 0)] * len(described)
 
     # /clock and odom are logged at their own stamp; the controller's answers at the step they answer or, by the
     # recorder, where the simulator's next /clock went out before them, at the next one

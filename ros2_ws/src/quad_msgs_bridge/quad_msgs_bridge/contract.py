@@ -78,9 +78,10 @@ TF_STATIC = TopicSpec('/tf_static', 'tf2_msgs/msg/TFMessage', LATCHED,
 
 ALL_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, GOAL_POSE, CONTROL_WRENCH,
               CONTROL_REFERENCE, CONTROL_DIAGNOSTICS, CLOCK, TF, GROUND_TRUTH, ROBOT_DESCRIPTION, TF_STATIC)
-#: what a flight bag records by default
+#: what a flight bag records by default: the latched topics (the path, the vehicle's description) once, the others
+#: per step
 RECORDED_TOPICS = (ODOM, ROTOR_FORCES, SETPOINTS, REFERENCE_PATH, CONTROL_WRENCH, CONTROL_REFERENCE,
-                   CONTROL_DIAGNOSTICS, CLOCK, TF)
+                   CONTROL_DIAGNOSTICS, CLOCK, TF, ROBOT_DESCRIPTION, TF_STATIC)
 #: the simulator's topics (the others are the controller's, the trajectory's and the tools')
 SIMULATOR_TOPICS = (ODOM, CLOCK, TF, GROUND_TRUTH)
 #: published at every step of a flight (the simulator's and the controllers' answers), the others once or on demand

@@ -4,7 +4,8 @@ The simulator publishes it on ``robot_description`` (std_msgs/String, transient 
 starts later still gets it; contract.ROBOT_DESCRIPTION) in each vehicle's namespace, and on
 ``/tf_static`` the fixed transforms of its rotor links (as robot_state_publisher would for the
 fixed joints), so a RobotModel display draws the quadrotor at the TF frame the simulator moves:
-``odom -> <namespace>/base_link``.
+``odom -> <namespace>/base_link``. Every flight bag records both once, at the flight's first stamp
+(:func:`description_messages`: the same messages for the simulator and the bags).
 
 Links (frame ids as on TF, prefixed with the vehicle's namespace like its body frame,
 contract.base_frame): ``<namespace>/base_link``, the body frame (FLU) at the geometric centre, with
@@ -20,7 +21,7 @@ import math
 import xml.etree.ElementTree as ElementTree
 from typing import Sequence
 
-from quad_msgs_bridge.contract import base_frame
+from quad_msgs_bridge.contract import ROBOT_DESCRIPTION, TF_STATIC, TopicSpec, base_frame
 from quad_msgs_bridge.conversions import MessageKit, tf_msg
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.vehicle_params import VehicleParams
@@ -89,3 +90,16 @@ def rotor_transforms_msg(kit: MessageKit, params: VehicleParams, namespaces: Seq
         rotors = [OdometrySample(0.0, position, level, still, still) for position in params.rotor_positions]
         transforms += tf_msg(kit, 0.0, rotors, rotor_frames(namespace), frame_id=base_frame(namespace)).transforms
     return kit['tf2_msgs/msg/TFMessage'](transforms=transforms)
+
+
+def description_messages(kit: MessageKit, params: VehicleParams, namespaces: Sequence[str],
+                         with_tf: bool = True) -> list[tuple[TopicSpec, str, object]]:
+    """The latched messages that describe the vehicles ``params`` in ``namespaces``, as the simulator publishes them
+    at its start and a flight bag records them: (contract topic, namespace it resolves in, message) for each
+    vehicle's ``robot_description`` (its :func:`vehicle_urdf`), then, ``with_tf``, the one ``/tf_static`` of every
+    vehicle's rotor links (:func:`rotor_transforms_msg`); nothing for no vehicle."""
+    messages = [(ROBOT_DESCRIPTION, namespace, kit[ROBOT_DESCRIPTION.type](data=vehicle_urdf(params, namespace)))
+                for namespace in namespaces]
+    if with_tf and namespaces:
+        messages.append((TF_STATIC, '', rotor_transforms_msg(kit, params, namespaces)))
+    return messages

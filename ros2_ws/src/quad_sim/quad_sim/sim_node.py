@@ -6,7 +6,8 @@ one ``/clock`` for all, each vehicle's ``odom`` in that vehicle's namespace (chi
 ``<namespace>/base_link``) and, with each odometry step, one ``/tf`` message holding every
 vehicle's ``odom -> <namespace>/base_link`` (its odometry pose, same stamp). Where ``tf2_msgs`` is
 not installed it says so once and runs without TF. At start it publishes each vehicle's URDF on its
-latched ``robot_description`` and, with TF, the rotor links on ``/tf_static`` (quad_msgs_bridge.urdf).
+latched ``robot_description`` and, with TF, the rotor links on ``/tf_static`` (quad_msgs_bridge.urdf),
+logged with its other messages where it keeps a publication log (``record_dir``).
 
 Modes:
 * lockstep (default): publish ``/clock``, every ``odom`` and ``/tf`` for time t, wait until every
@@ -33,14 +34,15 @@ from functools import partial
 import rclpy
 from rclpy.node import Node
 
-from quad_msgs_bridge.contract import (CLOCK, ODOM, ODOM_FRAME, ROBOT_DESCRIPTION, ROTOR_FORCES, TF, TF_STATIC,
-                                      base_frame, resolve, vehicle_namespaces)
-from quad_msgs_bridge.conversions import MessageKit
+from quad_msgs_bridge.bag.writer import jazzy_typestore
+from quad_msgs_bridge.contract import (CLOCK, ODOM, ODOM_FRAME, ROTOR_FORCES, TF, TF_STATIC, base_frame, resolve,
+                                      vehicle_namespaces)
+from quad_msgs_bridge.conversions import MessageKit, rosbags_kit
 from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder, tf_encoder
 from quad_msgs_bridge.ros_helpers import (declare, publication_log, publisher, run_node, subscription,
                                           wait_for_acknowledgements)
 from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
-from quad_msgs_bridge.urdf import rotor_transforms_msg, vehicle_urdf
+from quad_msgs_bridge.urdf import description_messages
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .fleet import Fleet, LockstepAnswers, split_initial_states
@@ -149,19 +151,21 @@ class SimNode(Node):
         try:
             return publisher(self, kit, TF, log=self.publication_log)
         except ImportError as error:
-            self.get_logger().warning(f'{TF.type} is not installed ({error}): running without TF, nothing on {TF.name}')
+            self.get_logger().warning(f'{TF.type} is not installed ({error}): running without TF, nothing on '
+                                      f'{TF.name} and {TF_STATIC.name}')
             return None
 
     def publish_robot_description(self, kit: MessageKit, params, namespaces) -> None:
         """Each vehicle's URDF on its latched ``robot_description`` and, with TF, the rotor links' fixed
-        transforms on ``/tf_static`` (quad_msgs_bridge.urdf), once: RViz and Foxglove draw the vehicle at its TF."""
-        self.description_pubs = [publisher(self, kit, ROBOT_DESCRIPTION, namespace) for namespace in namespaces]
-        for pub, namespace in zip(self.description_pubs, namespaces):
-            pub.publish(kit[ROBOT_DESCRIPTION.type](data=vehicle_urdf(params, namespace)))
-        self.tf_static_pub = None
-        if self.tf_pub is not None:
-            self.tf_static_pub = publisher(self, kit, TF_STATIC)
-            self.tf_static_pub.publish(rotor_transforms_msg(kit, params, namespaces))
+        transforms on ``/tf_static`` (quad_msgs_bridge.urdf), once: RViz and Foxglove draw the vehicle at its TF.
+        Sent as CDR bytes serialized by the rosbags Jazzy typestore, as an embedded flight's bag holds them (see
+        the trajectory node), and logged at the first step's sim time."""
+        serialize = jazzy_typestore().serialize_cdr
+        messages = description_messages(rosbags_kit(), params, namespaces, with_tf=self.tf_pub is not None)
+        self.description_pubs = [publisher(self, kit, topic, namespace, log=self.publication_log)
+                                 for topic, namespace, _ in messages]
+        for pub, (topic, _, message) in zip(self.description_pubs, messages):
+            pub.publish(serialize(message, topic.type).tobytes())
 
     # --- shared -----------------------------------------------------------------------------
     def publish_odometry(self, vehicles=None) -> None:

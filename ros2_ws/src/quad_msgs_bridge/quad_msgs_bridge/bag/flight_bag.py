@@ -5,7 +5,10 @@ sim-time stamps: ``/clock``, ``odom`` and ``/tf`` (simulator: one TFMessage, ``o
 ``<namespace>/base_link``), then ``rotor_forces``, ``control/wrench``, ``control/reference`` and
 ``control/diagnostics`` (controller). The body frame is the namespaced one the nodes use. Every
 message of a step is logged at that step's odometry stamp [ns]; ``setpoints`` and
-``reference_path`` once, at the path start.
+``reference_path`` once, at the path start. What describes the vehicle, as the simulator publishes
+it at its start (quad_msgs_bridge.urdf.description_messages), is logged once at the flight's first
+stamp, before that step's messages: the latched ``robot_description`` of each vehicle (its URDF) and
+``/tf_static`` (its rotor links), so a bag opened in Foxglove or replayed into RViz shows the vehicle.
 The run's vehicle parameters and settings go into the bag's custom data, so a review finds the arm
 length and the rotor limits without the vehicle file.
 """
@@ -21,12 +24,12 @@ from quad_msgs_bridge.contract import (CLOCK, CONTROL_DIAGNOSTICS, CONTROL_REFER
                                        GROUND_TRUTH, ODOM, ODOM_FRAME, RECORDED_TOPICS, REFERENCE_PATH, ROTOR_FORCES,
                                        SETPOINTS, TF, TopicSpec, base_frame, resolve)
 from quad_msgs_bridge.conversions import path_msg, rosbags_kit, setpoints_msg
-from quad_msgs_bridge.mixer import ROTOR_NAMES
 from quad_msgs_bridge.fast_cdr import (clock_encoder, diagnostics_encoder, odometry_encoder, pose_stamped_encoder,
                                        rotor_forces_encoder, tf_encoder, wrench_encoder)
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND, nanoseconds
+from quad_msgs_bridge.urdf import description_messages
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
 
 
@@ -92,15 +95,33 @@ def ros_flight_custom_data(params: VehicleParams, settle_time: float, seed: int,
                               **{key: value for key, value in labels.items() if value})
 
 
+class VehicleDescription:
+    """What a bag records of its vehicles' description (quad_msgs_bridge.urdf.description_messages: each one's
+    ``robot_description``, one ``/tf_static`` for all), held until the flight's first stamp."""
+
+    def __init__(self, writer: BagWriter, params: VehicleParams, namespaces: Sequence[str]):
+        self.writer = writer
+        recorded = set(writer.topic_names())
+        self._pending = [(resolve(spec, namespace), message)
+                         for spec, namespace, message in description_messages(rosbags_kit(), params, namespaces)
+                         if resolve(spec, namespace) in recorded]
+
+    def record(self, stamp: int) -> None:
+        """Write the description at log time ``stamp`` [ns], the first time only."""
+        for topic, message in self._pending:
+            self.writer.write_message(topic, message, stamp)
+        self._pending = []
+
+
 class FlightBag:
     """A bag fed by the embedded flight loop; a context manager that closes the bag.
 
-    With ``shared_topics`` false it writes one vehicle's topics only, not ``/clock`` and ``/tf``
-    (the fleet's :class:`FleetBag` writes those once per step for every vehicle).
+    With ``shared_topics`` false it writes one vehicle's topics only, not ``/clock``, ``/tf`` and the
+    vehicle's description (the fleet's :class:`FleetBag` writes those for every vehicle).
     """
 
-    def __init__(self, writer: BagWriter, arm_length: float, namespace: str = DEFAULT_NAMESPACE,
-                 shared_topics: bool = True, rotor_names: Sequence[str] = ROTOR_NAMES):
+    def __init__(self, writer: BagWriter, params: VehicleParams, namespace: str = DEFAULT_NAMESPACE,
+                 shared_topics: bool = True):
         self.writer = writer
         recorded = set(writer.topic_names())
 
@@ -118,10 +139,11 @@ class FlightBag:
         self._encode_clock = clock_encoder()
         self._encode_odometry = odometry_encoder(ODOM_FRAME, self._base_frame)
         self._encode_tf = tf_encoder([self._base_frame])
-        self._encode_forces = rotor_forces_encoder(rotor_names)     # the layout's labels (VehicleParams.rotor_names)
-        self._encode_wrench = wrench_encoder(arm_length, self._base_frame)
+        self._encode_forces = rotor_forces_encoder(params.rotor_names)     # the layout's labels
+        self._encode_wrench = wrench_encoder(params.d, self._base_frame)
         self._encode_pose = pose_stamped_encoder()
         self._encode_diagnostics = diagnostics_encoder()
+        self._description = VehicleDescription(writer, params, [namespace] if shared_topics else [])
 
     @classmethod
     def create(cls, path: str | Path, params: VehicleParams, settle_time: float, *,
@@ -130,7 +152,7 @@ class FlightBag:
         """A new bag at ``path`` for a flight of the vehicle ``params``; ``info`` labels the run."""
         custom_data = flight_custom_data(params, settle_time, namespace=namespace, **info)
         writer = BagWriter(path, topics, namespace, custom_data=custom_data, overwrite=overwrite)
-        return cls(writer, params.d, namespace, rotor_names=params.rotor_names)
+        return cls(writer, params, namespace)
 
     def record_setpoints(self, path: SetpointPath) -> None:
         """The trajectory node's ``setpoints`` and ``reference_path`` for ``path``, at its start stamp."""
@@ -149,9 +171,11 @@ class FlightBag:
         """One control step: the odometry answered, the thrusts [N] and U1..U4 sent, the reference
         [m, rad] used and the per-subsystem sliding surfaces, NN and fuzzy terms and surface slopes
         lambda [1/s]; with ``truth``
-        (the true state when the odometry carries sensor noise) also ``ground_truth/odom``."""
+        (the true state when the odometry carries sensor noise) also ``ground_truth/odom``. The first step
+        records the vehicle's description before it."""
         stamp = nanoseconds(odometry.stamp)
         sec, nanosec = divmod(stamp, NANOSECONDS_PER_SECOND)
+        self._description.record(stamp)
         write = self.writer.write_serialized
         if self._clock:
             write(self._clock, self._encode_clock(sec, nanosec), stamp)
@@ -190,19 +214,19 @@ class FlightBag:
 class FleetBag:
     """The bag of a fleet flown by the embedded loop: every vehicle's topics in its namespace, and
     ``/clock`` and one ``/tf`` (a transform per vehicle) once per step, as the fleet simulator
-    publishes them. ``vehicles[k]`` records vehicle k's own topics; a context manager that closes the bag.
+    publishes them; every vehicle's description once, at the first step. ``vehicles[k]`` records vehicle k's
+    own topics; a context manager that closes the bag.
     """
 
-    def __init__(self, writer: BagWriter, arm_length: float, namespaces: Sequence[str],
-                 rotor_names: Sequence[str] = ROTOR_NAMES):
+    def __init__(self, writer: BagWriter, params: VehicleParams, namespaces: Sequence[str]):
         self.writer = writer
-        self.vehicles = [FlightBag(writer, arm_length, namespace, shared_topics=False, rotor_names=rotor_names)
-                         for namespace in namespaces]
+        self.vehicles = [FlightBag(writer, params, namespace, shared_topics=False) for namespace in namespaces]
         recorded = set(writer.topic_names())
         self._clock = resolve(CLOCK, '') if resolve(CLOCK, '') in recorded else None
         self._tf = resolve(TF, '') if resolve(TF, '') in recorded else None
         self._encode_clock = clock_encoder()
         self._encode_tf = tf_encoder([base_frame(namespace) for namespace in namespaces])
+        self._description = VehicleDescription(writer, params, namespaces)
 
     @classmethod
     def create(cls, path: str | Path, params: VehicleParams, settle_time: float, namespaces: Sequence[str], *,
@@ -210,12 +234,14 @@ class FleetBag:
         """A new bag at ``path`` for a fleet of ``namespaces`` flying the vehicle ``params``."""
         custom_data = flight_custom_data(params, settle_time, vehicles=','.join(namespaces), **info)
         writer = BagWriter(path, topics, list(namespaces), custom_data=custom_data, overwrite=overwrite)
-        return cls(writer, params.d, namespaces, rotor_names=params.rotor_names)
+        return cls(writer, params, namespaces)
 
     def record_shared(self, odometries: Sequence[OdometrySample]) -> None:
-        """``/clock`` and ``/tf`` of a step, from every vehicle's odometry (all of one stamp)."""
+        """``/clock`` and ``/tf`` of a step, from every vehicle's odometry (all of one stamp); at the first
+        step, every vehicle's description before them."""
         stamp = nanoseconds(odometries[0].stamp)
         sec, nanosec = divmod(stamp, NANOSECONDS_PER_SECOND)
+        self._description.record(stamp)
         if self._clock:
             self.writer.write_serialized(self._clock, self._encode_clock(sec, nanosec), stamp)
         if self._tf:

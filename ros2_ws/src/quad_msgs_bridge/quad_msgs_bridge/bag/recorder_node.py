@@ -1,12 +1,15 @@
 """record node: writes what goes over the contract topics into a rosbag2 MCAP bag, at little cost to the flight.
 
 Every subscription is raw: the recorder gets the serialized CDR bytes that the publisher sent and
-writes them into the MCAP file as they are, never decoding or re-encoding a message. It does not
-wake per message either: every ``ROUND_PERIOD`` it takes what waits in every subscription's history
-(``RECORD_DEPTH`` deep, reliable); the MCAP chunks are compressed and written by the file's
-background thread. A lockstep flight never waits for the recorder (the simulator waits for the
-controllers only), so the recorder's cost to the flight is the CPU it takes from the simulator and
-the controllers, and the DDS delivery to one more reader.
+writes them into the MCAP file as they are, never decoding or re-encoding a message. Each has its
+topic's contract QoS, with a deeper history: the latched topics (``setpoints``, ``reference_path``,
+each vehicle's ``robot_description`` and ``/tf_static``) are read transient local, so the recorder
+gets their one message, sent as the trajectory and simulator nodes start, even where that was before
+its subscription matched. It does not wake per message either: every ``ROUND_PERIOD`` it takes what
+waits in every subscription's history (``RECORD_DEPTH`` deep, reliable); the MCAP chunks are
+compressed and written by the file's background thread. A lockstep flight never waits for the
+recorder (the simulator waits for the controllers only), so the recorder's cost to the flight is the
+CPU it takes from the simulator and the controllers, and the DDS delivery to one more reader.
 
 Each message has two times. The publish time is the wall time the publisher sent it (DDS source
 timestamp). The log time is the sim time of the latest ``/clock`` published before it (0 before the
