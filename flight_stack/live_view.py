@@ -34,7 +34,7 @@ from foxglove.messages import (Color, CylinderPrimitive, LinePrimitive, LinePrim
 from foxglove.websocket import ServerListener
 
 from quad_msgs_bridge.bag.flight_bag import FlightBag
-from quad_msgs_bridge.bag.writer import jazzy_typestore
+from quad_msgs_bridge.bag.writer import cdr_as_sent, jazzy_typestore
 from quad_msgs_bridge.contract import DEFAULT_NAMESPACE, ODOM_FRAME, RECORDED_TOPICS, QosSpec, TopicSpec, resolve
 from quad_msgs_bridge.frames import Vec3, euler_from_quaternion, rotation_from_euler
 from quad_msgs_bridge.reference import SetpointPath
@@ -204,7 +204,7 @@ class LiveTopics:
         self._server.log(self._channels[topic], data, log_time_ns, latched=topic in self._latched)
 
     def write_message(self, topic: str, msg, log_time_ns: int, publish_time_ns: int | None = None) -> None:
-        self.write_serialized(topic, bytes(self._server.typestore.serialize_cdr(msg, self._types[topic])), log_time_ns)
+        self.write_serialized(topic, cdr_as_sent(self._server.typestore, msg, self._types[topic]), log_time_ns)
 
     def close(self) -> None:
         """Nothing to finish: the server outlives the topics of one vehicle."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 from rclpy.node import Node
 
 from quad_msgs_bridge.contract import REFERENCE_PATH, SETPOINTS, base_frame
-from quad_msgs_bridge.bag.writer import jazzy_typestore
+from quad_msgs_bridge.bag.writer import cdr_as_sent, jazzy_typestore
 from quad_msgs_bridge.conversions import MessageKit, path_msg, rosbags_kit, setpoints_msg
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.ros_helpers import declare, publication_log, publisher, run_node
@@ -43,12 +43,11 @@ class TrajectoryNode(Node):
         # published as CDR bytes serialized by the rosbags Jazzy typestore, as the embedded flight's bag holds them
         # (rclpy's serialize_message on Fast DDS leaves the alignment padding uninitialised: a log of its bytes
         # would differ from flight to flight)
-        messages = rosbags_kit()
-        serialize = jazzy_typestore().serialize_cdr
+        messages, typestore = rosbags_kit(), jazzy_typestore()
         publisher(self, kit, SETPOINTS, log=self.publication_log).publish(
-            serialize(setpoints_msg(messages, path, child_frame_id=body), SETPOINTS.type).tobytes())
+            cdr_as_sent(typestore, setpoints_msg(messages, path, child_frame_id=body), SETPOINTS.type))
         publisher(self, kit, REFERENCE_PATH, log=self.publication_log).publish(
-            serialize(path_msg(messages, path), REFERENCE_PATH.type).tobytes())
+            cdr_as_sent(typestore, path_msg(messages, path), REFERENCE_PATH.type))
         self.get_logger().info(f'{scenario}: {len(path.times)} setpoints from t={path.start:.3f} s '
                                f'to {path.end:.3f} s published')
 

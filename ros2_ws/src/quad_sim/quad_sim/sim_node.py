@@ -34,7 +34,7 @@ from functools import partial
 import rclpy
 from rclpy.node import Node
 
-from quad_msgs_bridge.bag.writer import jazzy_typestore
+from quad_msgs_bridge.bag.writer import cdr_as_sent, jazzy_typestore
 from quad_msgs_bridge.contract import (CLOCK, ODOM, ODOM_FRAME, ROTOR_FORCES, TF, TF_STATIC, base_frame, resolve,
                                       vehicle_namespaces)
 from quad_msgs_bridge.conversions import MessageKit, rosbags_kit
@@ -160,12 +160,12 @@ class SimNode(Node):
         transforms on ``/tf_static`` (quad_msgs_bridge.urdf), once: RViz and Foxglove draw the vehicle at its TF.
         Sent as CDR bytes serialized by the rosbags Jazzy typestore, as an embedded flight's bag holds them (see
         the trajectory node), and logged at the first step's sim time."""
-        serialize = jazzy_typestore().serialize_cdr
+        typestore = jazzy_typestore()
         messages = description_messages(rosbags_kit(), params, namespaces, with_tf=self.tf_pub is not None)
         self.description_pubs = [publisher(self, kit, topic, namespace, log=self.publication_log)
                                  for topic, namespace, _ in messages]
         for pub, (topic, _, message) in zip(self.description_pubs, messages):
-            pub.publish(serialize(message, topic.type).tobytes())
+            pub.publish(cdr_as_sent(typestore, message, topic.type))
 
     # --- shared -----------------------------------------------------------------------------
     def publish_odometry(self, vehicles=None) -> None:

@@ -31,6 +31,15 @@ def jazzy_typestore() -> Typestore:
     return get_typestore(Stores.ROS2_JAZZY)
 
 
+def cdr_as_sent(typestore: Typestore, message, msgtype: str) -> bytes:
+    """``message`` (a ``typestore`` message object of ``msgtype``) as CDR bytes the way DDS carries them: the
+    serialized payload padded with zeros to a multiple of 4 bytes (an RTPS serialized payload is 4-byte aligned;
+    Fast DDS delivers a 3,491-byte ``robot_description`` as 3,492 bytes), so that what a node publishes, logs and
+    a recorder receives are the same bytes, and an embedded flight's bag holds them too."""
+    data = bytes(typestore.serialize_cdr(message, msgtype))
+    return data + bytes(-len(data) % 4)
+
+
 def _prepare_directory(path: Path, overwrite: bool) -> None:
     """Create the bag directory; an existing one must be empty, or a bag when ``overwrite``."""
     try:
@@ -141,8 +150,8 @@ class BagWriter:
                                data)
 
     def write_message(self, topic: str, msg, log_time_ns: int, publish_time_ns: int | None = None) -> None:
-        """Record a ``rosbags`` message object (serialized here with the typestore)."""
-        self.write_serialized(topic, self.typestore.serialize_cdr(msg, self._types[topic]), log_time_ns,
+        """Record a ``rosbags`` message object (serialized here with the typestore, :func:`cdr_as_sent`)."""
+        self.write_serialized(topic, cdr_as_sent(self.typestore, msg, self._types[topic]), log_time_ns,
                               publish_time_ns)
 
     # --- closing ------------------------------------------------------------------------------
