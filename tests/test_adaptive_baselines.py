@@ -37,8 +37,10 @@ def test_l1_estimate_of_a_constant_force_converges_as_its_bandwidths_predict():
     + max_k mu (T_s - Phi) / Phi |f_z(k)|; at t = 4 / w that is 1.8 % of d_z plus terms of order a T_s,
     while at t = 0.5 / w the filter has covered only 1 - exp(-0.5) = 39 % of it.
     """
-    controller = build_controller('l1-se3', VEHICLE, GAINS)
-    l1 = GAINS['l1_se3']
+    gains = copy.deepcopy(GAINS)     # the bandwidths of the derivation (the tuned ones give a bound of 3.1 %)
+    gains['l1_se3'].update(predictor_pole_translation=5.0, cutoff_translation_hz=5.0)
+    controller = build_controller('l1-se3', VEHICLE, gains)
+    l1 = gains['l1_se3']
     a, w = l1['predictor_pole_translation'], 2.0 * math.pi * l1['cutoff_translation_hz']
     mu, phi = math.exp(-a * DT), -math.expm1(-a * DT) / a
     r = mu * DT / phi

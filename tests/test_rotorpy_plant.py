@@ -122,10 +122,11 @@ def test_both_plants_fly_the_same_10_s_paper_flight_with_rotorpys_effects_off():
     1e-10 per step where the structures coincide (the test above). Such a difference grows with attitude times
     rate, so it is largest in the take-off (measured: 0.35 rad of roll at 4.6 rad/s, 1.2 mm, 7 mm/s, 13 mrad and
     0.2 rad/s apart, 4 % of the largest angle and rate) and small once the vehicle tracks (after 2 s: 0.44 mm,
-    1.4 mm/s, 0.6 mrad, 1.4 mrad/s). The bounds are about 2.5-3x those."""
+    1.4 mm/s, 0.6 mrad, 1.4 mrad/s). The bounds are about 2.5-3x those. The PID flies the untuned gains, those of
+    these measurements (the tuned ones take off harder, so the structures differ more)."""
     from flight_stack.api import fly
-    ours = fly('pid', 'paper', duration=10.0, vehicle=MATCHED, plant='quad_sim')
-    theirs = fly('pid', 'paper', duration=10.0, vehicle=MATCHED, plant='rotorpy-bare')
+    ours = fly('pid', 'paper', duration=10.0, vehicle=MATCHED, plant='quad_sim', gains='untuned')
+    theirs = fly('pid', 'paper', duration=10.0, vehicle=MATCHED, plant='rotorpy-bare', gains='untuned')
     assert ours.state.shape == theirs.state.shape and ours.time[-1] >= 9.99
     difference = np.abs(ours.state - theirs.state)
     whole = difference.max(axis=0)

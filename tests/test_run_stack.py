@@ -14,7 +14,7 @@ import pytest
 import run_stack
 from flight_stack import embedded, ros_backend
 from flight_stack.output import RUN_ENTRIES, STAGING_MARK
-from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE, load_gains
+from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE, load_gains, locate_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.flight_bag import FlightBag
 from quad_msgs_bridge.bag.metadata import read_metadata
@@ -57,8 +57,9 @@ def earlier_run(earlier_run_template, tmp_path):
     return out, snapshot(out)
 
 
-def gains_file(tmp_path: Path, old: str, new: str) -> str:
-    text = DEFAULT_CONTROLLER_FILE.read_text()
+def gains_file(tmp_path: Path, old: str, new: str, source: Path = DEFAULT_CONTROLLER_FILE) -> str:
+    """A copy of the gains file ``source`` (default: the packaged one) with ``old`` replaced by ``new`` once."""
+    text = source.read_text()
     assert old in text
     path = tmp_path / 'gains.yaml'
     path.write_text(text.replace(old, new, 1))
@@ -68,7 +69,8 @@ def gains_file(tmp_path: Path, old: str, new: str) -> str:
 BAD_SETTINGS = {   # the settings of issue 10 (and a few more) -> what the error must name
     'control_rate 0': (lambda tmp: ['--gains', gains_file(tmp, 'control_rate: 1000.0', 'control_rate: 0')],
                        'common.control_rate: 0.0 is outside the valid range (0.0, inf)'),
-    'negative learning_rate': (lambda tmp: ['--gains', gains_file(tmp, 'learning_rate: 0.9,', 'learning_rate: -0.9,')],
+    'negative learning_rate': (lambda tmp: ['--gains', gains_file(tmp, 'learning_rate: 0.9,', 'learning_rate: -0.9,',
+                                                                        locate_gains('untuned'))],
                                'nnit2fsmc.axes.x.learning_rate: -0.9 is outside the valid range [0.0, inf)'),
     'type_reducer kmx': (lambda tmp: ['--gains', gains_file(tmp, 'type_reducer: km ', 'type_reducer: kmx ')],
                          "type_reducer: 'kmx' is not one of km, nie-tan"),

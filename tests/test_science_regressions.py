@@ -465,12 +465,12 @@ def test_the_matching_slope_is_the_fuzzy_terms_derivative_at_s_zero(lower_height
         pytest.approx(numerical, rel=1e-5)
 
 
-def test_the_packaged_baselines_are_matched_at_the_small_signal_slope():
+def test_the_untuned_baselines_are_matched_at_the_small_signal_slope():
     """The default IT2 shape (H 0.6, w 0.35, KM): slope 1 / (2 H) = 0.8333 at S = 0, 17 % below the
-    least-squares slope over the universe, and the packaged pid's x derivative gain is that slope times
-    fuzzy_gain / input_scale."""
+    least-squares slope over the universe, and the untuned pid's x derivative gain (the packaged one before
+    issue 26's tuning) is that slope times fuzzy_gain / input_scale."""
     gains = _bench('baseline_gains')
-    packaged = load_gains()
+    packaged = load_gains('untuned')
     assert gains.fuzzy_slope(packaged) == pytest.approx(1.0 / 1.2, rel=1e-12)
     assert gains.least_squares_slope(packaged) == pytest.approx(1.0054, abs=1e-4)
     x = packaged['nnit2fsmc']['axes']['x']

@@ -122,10 +122,11 @@ def test_the_mixers_hover_forces_hold_an_x_vehicle_still(name):
 @pytest.mark.parametrize('name, kind', [('crazyflie', 'nnit2fsmc'), ('hummingbird', 'se3'), ('x500', 'pid')])
 def test_an_x_vehicle_hovers_level_with_equal_rotor_forces(name, kind):
     """Closed loop, no disturbances: after take-off the vehicle holds the hover point level, and its four
-    rotors share the weight equally (what the X layout's eq. (2) gives for no torque)."""
+    rotors share the weight equally (what the X layout's eq. (2) gives for no torque). 14 s: the tuned pid's
+    height loop (z ki 12.3 /s^3, kd 33.9 /s) overshoots 5 cm at 4 s and settles within 2 cm from about 9 s."""
     params = load_vehicle(name)
-    flight = fly(kind, 'hover', duration=8.0, vehicle=name, disturbances=False)
-    last = flight.time >= 6.0
+    flight = fly(kind, 'hover', duration=14.0, vehicle=name, disturbances=False)
+    last = flight.time >= 12.0
     np.testing.assert_allclose(flight.state[last][:, 6:8], 0.0, atol=2e-3)           # roll, pitch [rad]
     np.testing.assert_allclose(flight.state[last][:, 2], 1.0, atol=0.02)             # the hover height [m]
     forces = flight.forces[last][-1]
