@@ -16,6 +16,7 @@ from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.reference import hold
 from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 from quad_sim.model import QuadrotorModel
+from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
 from quad_sim.simulator import Simulator
 
 VEHICLE, DISTURBANCES = load_vehicle_file()
@@ -117,6 +118,77 @@ def test_indi_rejects_a_moment_step_as_its_filter_predicts():
         np.testing.assert_allclose(fraction, expected, atol=0.01)
         assert abs(fraction[steps]) <= 0.05 + 0.01 and abs(fraction[steps - 2]) > 0.05
 
+
+
+def first_order_step_response(blends, steps: int) -> np.ndarray:
+    """The response to a unit step at sample 0 of the cascade of discrete first-order low-passes
+    x(k) = x(k-1) + b (u(k) - x(k-1)), one per blend b, at samples 0 .. steps - 1."""
+    states, response = [0.0] * len(blends), []
+    for _ in range(steps):
+        u = 1.0
+        for i, b in enumerate(blends):
+            states[i] += b * (u - states[i])
+            u = states[i]
+        response.append(u)
+    return np.array(response)
+
+
+def test_indi_rejects_a_vertical_force_step_through_the_measurement_stage_as_its_filters_predict():
+    """A step d in an unmodelled vertical force at step j on a point mass m dv/dt = U1 + d - m g, the attitude
+    level, every position gain 0 and a hover reference (a_c = 0), the velocity read through the measurement
+    stage (its velocity filter S, common.velocity_filter_hz) as every kind reads it.
+
+    By hand (indi module docstring): the velocity and the modelled thrust pass through the same S and the same
+    acceleration filter H, so a_f(k) = SH[(U1 + d) / m - g](k - 1) and T_f(k) = SH[U1](k - 1) and
+    U1(k) = T_f - m a_f = m g - SH[d](k - 1): the part of the disturbance left, U1 + d - m g, is
+    d (1 - s(k - j - 1)) with s the step response of the cascade S H. With T_f through H alone (S left out of
+    the modelled side) the increments are not synchronised and the rejection is not this one."""
+    gains = indi_gains(effectiveness_rate=0.0)
+    controller = build_controller('indi', VEHICLE, gains)
+    stage = build_measurement_stage(gains)
+    blends = [2.0 * math.pi * hz * DT / (1.0 + 2.0 * math.pi * hz * DT)
+              for hz in (gains['common']['velocity_filter_hz'], gains['indi']['acceleration_filter_hz'])]
+    assert gains['common']['velocity_filter_hz'] > 0.0
+    j, d, steps = 20, -1.2, 300                    # [N] a downward pull
+    state, left = list(HOVER), []
+    for k in range(j + steps):
+        out = controller.update(k * DT, stage(state), hold((0.0, 0.0, 1.0)))
+        force = d if k >= j else 0.0
+        if k >= j:
+            left.append((out.controls[0] + force - VEHICLE.m * VEHICLE.g) / d)
+        acceleration = (out.controls[0] + force) / VEHICLE.m - VEHICLE.g
+        state[2] += DT * state[5] + 0.5 * DT * DT * acceleration
+        state[5] += DT * acceleration
+    expected = 1.0 - np.concatenate(([0.0], first_order_step_response(blends, steps - 1)))
+    np.testing.assert_allclose(left, expected, atol=0.01)
+
+
+def roll_pitch_command_spread(kind: str, velocity_noise: float, duration: float = 3.0) -> float:
+    """The standard deviation of U2 and U3 [N] (the larger) over the last second of ``duration`` [s] of hover at
+    1 m (from the ground) by ``kind`` on the nominal vehicle, its measured velocity carrying white noise of
+    ``velocity_noise`` [m/s] (seeded), read through the measurement stage."""
+    trajectory = make_scenario('hover', duration)
+    controller = build_controller(kind, VEHICLE, GAINS)
+    simulator = Simulator(QuadrotorModel(VEHICLE, DISTURBANCES), DT, trajectory.initial_state)
+    noise = SensorNoise(SensorErrors(velocity=velocity_noise), SensorErrors(), np.random.default_rng(3),
+                        np.random.default_rng(4))
+    loop = ClosedLoop(controller, simulator, setpoint_path(published_path(trajectory, 50.0)).sample, 1,
+                      FailureRules(settle_time=duration, max_error=1.0), sensor_noise=noise,
+                      measurement=build_measurement_stage(GAINS))
+    steps = int(round(duration / DT))
+    commands = [loop.step().output.controls[1:3] for _ in range(steps)]
+    assert loop.flying
+    return float(np.max(np.std(np.array(commands[-int(round(1.0 / DT)):]), axis=0)))
+
+
+def test_indi_attitude_loop_does_not_differentiate_the_velocity_noise_again():
+    """INDI's desired attitude comes from T_c, which holds a_f, a filtered derivative of the measured velocity;
+    its desired body rates and angular acceleration are the reference's (differential flatness, Tal & Karaman),
+    not two more derivatives of that attitude. So 2 cm/s of velocity noise (the example campaign's) moves its
+    roll and pitch commands about as much as it moves se3's, whose desired attitude holds the velocity itself
+    (k_v v): within 3 times, where the third derivative of the noise put them at the rotor limits."""
+    indi, se3 = roll_pitch_command_spread('indi', 0.02), roll_pitch_command_spread('se3', 0.02)
+    assert indi <= 3.0 * se3, (indi, se3)
 
 #: the LMS step of the effectiveness test: 20 times the packaged one, which is kept small so that campaign sensor
 #: noise does not drive the estimate (docs/ADAPTIVE_BASELINES.md); the law is the same (stable for mu in (0, 2))

@@ -235,7 +235,7 @@ def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] 
         indi_gains = {axis: tuple(_non_negative(gains, f'indi.axes.{axis}.{name}') for name in ('k_error', 'k_rate'))
                       for axis in AXES}
         return INDIController(kind, params, indi_gains, lam, dt, {key: _get(gains, f'indi.{key}') for key in INDI_KEYS},
-                              **structure)
+                              velocity_filter_hz=_non_negative(gains, 'common.velocity_filter_hz'), **structure)
     if kind == 'nnit2fsmc' or kind in ABLATIONS:
         laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch, params) for axis in AXES}
     elif kind in ('smc-sign', 'smc-sat'):

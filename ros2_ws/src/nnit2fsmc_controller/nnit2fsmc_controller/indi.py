@@ -42,9 +42,17 @@ is realised incrementally too:
     T_c = T_f + m (a_c - a_f)       [N, world]
 
 with a_f the derivative of the low-passed measured velocity and T_f the thrust vector U1 R e3 the
-rotors produced (modelled response, same filter, cutoff ``acceleration_filter_hz``). T_c then sets
+rotors produced: the modelled response of the collective thrust U1 (the rotors lag U1, not the axis)
+along the measured thrust axis R e3, through the same filters as the velocity. The velocity reaches
+the controller through the measurement stage's low-pass S (``common.velocity_filter_hz``, every kind
+reads it) before the acceleration filter H (cutoff ``acceleration_filter_hz``), so T_f passes through
+S and H both: a force step d is rejected as the step response s of the cascade S H rises, the part
+left after n steps being d (1 - s(n - 1)) (tests/test_adaptive_baselines.py). T_c then sets
 the thrust axis and the collective thrust as in ``se3`` (tilt limit, minimum lift), and the desired
-attitude is its flat attitude with the reference yaw.
+attitude is its flat attitude with the reference yaw. The desired body rates and their derivative are
+those of the reference's flat attitude (its acceleration, jerk, snap and yaw motion; Tal & Karaman
+sec. III), not derivatives of the desired attitude: that holds a_f, so two more derivatives would put
+the third derivative of the velocity noise into alpha_d.
 
 What it measures: body rates and velocity (it differentiates both: the odometry here carries no
 accelerometer, so its alpha_f and a_f are filtered derivatives, with noise amplified by the
@@ -67,16 +75,17 @@ from quad_msgs_bridge.frames import body_rates_from_euler_rates, rotation_from_e
 from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.vehicle_params import check_number
 
+from .controller import flat_attitude_of
 from .l1_adaptive import memory_slots, per_vehicle_rows
 from .se3 import SE3Controller
 
 #: the slots of one vehicle's INDI memory, in order, and their sizes
 MEMORY = (('omega_f', 3), ('alpha_f', 3), ('moment_f', 3), ('moment_model', 3), ('eta', 3), ('velocity_f', 3),
-          ('acceleration_f', 3), ('thrust_f', 3), ('thrust_model', 3), ('moment_command', 3),
-          ('thrust_command', 3), ('started', 1))
+          ('acceleration_f', 3), ('thrust_stage', 3), ('thrust_f', 3), ('thrust_model', 1), ('moment_command', 3),
+          ('thrust_command', 1), ('started', 1))
 SLOT, MEMORY_SIZE = memory_slots(MEMORY)
-(OMEGA_F, ALPHA_F, MOMENT_F, MOMENT_MODEL, ETA, VELOCITY_F, ACCELERATION_F, THRUST_F, THRUST_MODEL, MOMENT_COMMAND,
- THRUST_COMMAND, STARTED) = (SLOT[name] for name, _ in MEMORY)
+(OMEGA_F, ALPHA_F, MOMENT_F, MOMENT_MODEL, ETA, VELOCITY_F, ACCELERATION_F, THRUST_STAGE, THRUST_F, THRUST_MODEL,
+ MOMENT_COMMAND, THRUST_COMMAND, STARTED) = (SLOT[name] for name, _ in MEMORY)
 
 
 @njit(cache=True)
@@ -84,9 +93,12 @@ def indi_vehicle(memory, measured, held, constants):
     """One vehicle's INDI measurements at a control instant (module docstring): the modelled rotor response
     to the last command, the filtered body rates and their derivative alpha_f, the filtered modelled
     moment M_f, the effectiveness step (unless ``held``), the filtered velocity and its derivative a_f, the
-    filtered modelled thrust vector T_f. ``measured``: v (3) [m/s, world], Omega (3) [rad/s, body].
-    ``constants``: (b_rate, b_acceleration, motor_blend, T_s, mu, epsilon, eta_min, eta_max, Ix, Iy, Iz)."""
-    b_r, b_a, motor, dt, mu, eps, eta_min, eta_max, ix, iy, iz = constants
+    filtered modelled thrust vector T_f (the modelled collective thrust along the measured thrust axis, through
+    the measurement stage's velocity filter and the acceleration filter, as the velocity is).
+    ``measured``: v (3) [m/s, world], Omega (3) [rad/s, body], the thrust axis R e3 (3) [world].
+    ``constants``: (b_rate, b_acceleration, b_stage, motor_blend, T_s, mu, epsilon, eta_min, eta_max, Ix, Iy, Iz),
+    b_stage the blend of the measurement stage's velocity filter (1: none)."""
+    b_r, b_a, b_v, motor, dt, mu, eps, eta_min, eta_max, ix, iy, iz = constants
     if memory[STARTED] == 0.0:
         for i in range(3):
             memory[OMEGA_F + i] = measured[3 + i]
@@ -94,9 +106,9 @@ def indi_vehicle(memory, measured, held, constants):
         memory[STARTED] = 1.0
         return
     inertia = (ix, iy, iz)
+    memory[THRUST_MODEL] += motor * (memory[THRUST_COMMAND] - memory[THRUST_MODEL])
     for i in range(3):
         memory[MOMENT_MODEL + i] += motor * (memory[MOMENT_COMMAND + i] - memory[MOMENT_MODEL + i])
-        memory[THRUST_MODEL + i] += motor * (memory[THRUST_COMMAND + i] - memory[THRUST_MODEL + i])
         omega_f = memory[OMEGA_F + i] + b_r * (measured[3 + i] - memory[OMEGA_F + i])
         alpha_f = (omega_f - memory[OMEGA_F + i]) / dt
         moment_f = memory[MOMENT_F + i] + b_r * (memory[MOMENT_MODEL + i] - memory[MOMENT_F + i])
@@ -109,13 +121,14 @@ def indi_vehicle(memory, measured, held, constants):
         velocity_f = memory[VELOCITY_F + i] + b_a * (measured[i] - memory[VELOCITY_F + i])
         memory[ACCELERATION_F + i] = (velocity_f - memory[VELOCITY_F + i]) / dt
         memory[VELOCITY_F + i] = velocity_f
-        memory[THRUST_F + i] += b_a * (memory[THRUST_MODEL + i] - memory[THRUST_F + i])
+        memory[THRUST_STAGE + i] += b_v * (memory[THRUST_MODEL] * measured[6 + i] - memory[THRUST_STAGE + i])
+        memory[THRUST_F + i] += b_a * (memory[THRUST_STAGE + i] - memory[THRUST_F + i])
 
 
 @njit(cache=True)
 def indi_batch(memory, measured, held, constants):
     """:func:`indi_vehicle` for every vehicle of a batch: row b of ``memory`` (B, MEMORY_SIZE) and of
-    ``measured`` (B, 6), ``held`` (B,)."""
+    ``measured`` (B, 9), ``held`` (B,)."""
     for b in range(memory.shape[0]):
         indi_vehicle(memory[b], measured[b], held[b], constants)
 
@@ -133,11 +146,13 @@ class INDIController(SE3Controller):
     k_R [1/s^2], k_W [1/s] (accelerations: per unit of mass and inertia). ``indi``: the filter cutoffs
     ``rate_filter_hz``, ``acceleration_filter_hz`` [Hz], ``motor_time_constant`` [s], ``effectiveness_rate``
     mu [-], ``effectiveness_threshold`` epsilon [rad/s^2], ``effectiveness_min``, ``effectiveness_max`` [-].
+    ``velocity_filter_hz`` [Hz]: the cutoff of the measurement stage's velocity filter the controller reads
+    through (``common.velocity_filter_hz``; 0: none), applied to the modelled thrust vector as well.
     """
 
     STATE = SE3Controller.STATE + ('memory',)
 
-    def __init__(self, name, params, gains, lam, dt, indi: dict, **structure):
+    def __init__(self, name, params, gains, lam, dt, indi: dict, velocity_filter_hz: float, **structure):
         super().__init__(name, params, {axis: (*gains[axis], 0.0, 0.0) for axis in gains}, lam, dt, **structure)
         rate_hz = check_number('indi.rate_filter_hz', indi['rate_filter_hz'], 0.0, low_inclusive=False)
         acceleration_hz = check_number('indi.acceleration_filter_hz', indi['acceleration_filter_hz'], 0.0,
@@ -149,7 +164,9 @@ class INDIController(SE3Controller):
         eta_max = check_number('indi.effectiveness_max', indi['effectiveness_max'], 1.0)
         p = params
         self.rate_blend = first_order_blend(rate_hz, self.dt)
+        stage_hz = check_number('common.velocity_filter_hz', velocity_filter_hz, 0.0)
         self.constants = (self.rate_blend, first_order_blend(acceleration_hz, self.dt),
+                          first_order_blend(stage_hz, self.dt) if stage_hz > 0.0 else 1.0,
                           1.0 if tau == 0.0 else -math.expm1(-self.dt / tau), self.dt, mu, eps, eta_min, eta_max,
                           float(p.Ix), float(p.Iy), float(p.Iz))
         count = 1 if self.batch is None else self.batch
@@ -157,8 +174,9 @@ class INDIController(SE3Controller):
         self.memory = np.zeros((count, MEMORY_SIZE))
         self.memory[:, ETA:ETA + 3] = 1.0
         hover = (0.0, 0.0, float(p.m * p.g))    # before the first command: the rotors hold the nominal weight
-        for slot in (THRUST_F, THRUST_MODEL, THRUST_COMMAND):
+        for slot in (THRUST_STAGE, THRUST_F):
             self.memory[:, slot:slot + 3] = hover
+        self.memory[:, THRUST_MODEL] = self.memory[:, THRUST_COMMAND] = p.m * p.g
 
     def _values(self, slot: int) -> tuple:
         """The three values at ``slot`` of every vehicle: floats for one vehicle, arrays for a batch."""
@@ -175,7 +193,8 @@ class INDIController(SE3Controller):
         """T_c = T_f + m (a_c - a_f) [N, world] after this step's measurements; m (a_c + g e3) while held."""
         count = self.memory.shape[0]
         omega = body_rates_from_euler_rates(state[6:9], state[9:12])
-        indi_batch(self.memory, per_vehicle_rows((*state[3:6], *omega), count),
+        axis = [row[2] for row in rotation_from_euler(*state[6:9])]
+        indi_batch(self.memory, per_vehicle_rows((*state[3:6], *omega, *axis), count),
                    np.ascontiguousarray(np.broadcast_to(held, (count,))), self.constants)
         p = self.params
         xp = namespace_for(*state)
@@ -185,6 +204,18 @@ class INDIController(SE3Controller):
         incremental = [t + p.m * (a - af) for t, a, af in zip(self._values(THRUST_F), commanded,
                                                                 self._values(ACCELERATION_F))]
         return [xp.where(held, m, i) for m, i in zip(model, incremental)]
+
+    def desired_attitude_rates(self, phi_d, theta_d, reference, z) -> tuple:
+        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2]: those of the reference's flat attitude, from its
+        acceleration, jerk, snap and yaw motion (differential flatness, :func:`.controller.flat_attitude_of`),
+        not derivatives of phi_d, theta_d: these come from T_c, which holds a_f, itself a filtered derivative of the
+        measured velocity, and two more derivatives would feed the attitude loop the third derivative of the
+        velocity noise (module docstring)."""
+        (ax, ay, _), (jx, jy, _), (sx, sy, _) = reference.acceleration, reference.jerk, reference.snap
+        _, dphi, ddphi, _, dtheta, ddtheta = flat_attitude_of(ax, ay, jx, jy, sx, sy, reference.yaw, reference.yaw_rate,
+                                                              reference.yaw_acceleration, z, self.params.g,
+                                                              self.tilt_limit.kernel_parameters)
+        return dphi, ddphi, dtheta, ddtheta
 
     def moment(self, state, angular_acceleration, gyroscopic, held):
         """M_c = M_f + J / eta (alpha_d - alpha_f) [N m, body]; J alpha_d + Omega x J Omega while held."""
@@ -196,13 +227,11 @@ class INDIController(SE3Controller):
             self._values(ALPHA_F)))
 
     def applied(self, state, controls, held) -> None:
-        """Keep the commanded moment (d U2, d U3, U4) [N m, body] and thrust U1 R e3 [N, world] for the
-        modelled rotor response of the next step."""
+        """Keep the commanded moment (d U2, d U3, U4) [N m, body] and collective thrust U1 [N] for the
+        modelled rotor response of the next step (the rotors lag U1; the thrust axis is measured then)."""
         p = self.params
         u1, u2, u3, u4 = (np.asarray(u, dtype=float) for u in controls)
-        axis = [row[2] for row in rotation_from_euler(*state[6:9])]
         rows = self.memory
         for i, value in enumerate((u2 * p.d, u3 * p.d, u4)):
             rows[:, MOMENT_COMMAND + i] = value
-        for i in range(3):
-            rows[:, THRUST_COMMAND + i] = u1 * np.asarray(axis[i], dtype=float)
+        rows[:, THRUST_COMMAND] = u1

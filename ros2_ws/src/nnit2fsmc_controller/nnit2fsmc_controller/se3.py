@@ -157,6 +157,15 @@ class SE3Controller:
         force[2] = force[2] + p.m * p.g
         return force
 
+    def desired_attitude_rates(self, phi_d, theta_d, reference: ReferenceSample, z) -> tuple:
+        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2] of the desired roll and pitch phi_d, theta_d [rad]:
+        their filtered derivatives (``angle_filter_tau``). The reference and the height z [m] serve the kinds that
+        take them from the reference instead (:mod:`.indi`)."""
+        f = self._filters
+        dphi_d = f['dphi'].update(phi_d)
+        dtheta_d = f['dtheta'].update(theta_d)
+        return dphi_d, f['ddphi'].update(dphi_d), dtheta_d, f['ddtheta'].update(dtheta_d)
+
     def moment(self, state, angular_acceleration, gyroscopic, held):
         """M [N m, body] realising the desired angular acceleration [rad/s^2, body] on the nominal model:
         J angular_acceleration + Omega x J Omega. The adaptive kinds replace this."""
@@ -205,11 +214,7 @@ class SE3Controller:
         heading_y = -spsi * force[0] + cpsi * force[1]       # in the frame turned by -psi_d
         theta_d = xp.atan2(heading_x, lift)
         phi_d = xp.atan2(-heading_y, xp.hypot(heading_x, lift))
-        f = self._filters
-        dphi_d = f['dphi'].update(phi_d)
-        ddphi_d = f['ddphi'].update(dphi_d)
-        dtheta_d = f['dtheta'].update(theta_d)
-        ddtheta_d = f['ddtheta'].update(dtheta_d)
+        dphi_d, ddphi_d, dtheta_d, ddtheta_d = self.desired_attitude_rates(phi_d, theta_d, reference, z)
         desired = (phi_d, theta_d, psi_d)
         desired_rates = (dphi_d, dtheta_d, reference.yaw_rate)
         omega_d = body_rates_from_euler_rates(desired, desired_rates)
