@@ -306,8 +306,9 @@ def test_se3_tilt_limit_keeps_the_direction_of_the_horizontal_force(height, limi
 #: bounds [m] on the position RMSE after 5 s of an 8 s paper flight (section IV disturbances), each about 3x what
 #: the kind flies with the packaged gains (every kind through the measurement stage; since issue 26 the tuned gains
 #: of docs/TUNING.md, second round, and the take-off hold of adaptation only): nnit2fsmc 1.97, smc-sign 5.8,
-#: smc-sat 23.9, smc-integral 0.14, pid 1.36, se3 1.53, l1-se3 0.20, indi 2.1 mm (its flat attitude rates, docs/ADAPTIVE_BASELINES.md); the ablations -sat, -type1 1.71,
-#: -nolearn 114, -bias 0.41 mm. A broken law (a lost term, a sign) misses them.
+#: smc-sat 23.9, smc-integral 0.14, pid 1.36, se3 1.53, l1-se3 0.20, indi 2.1 mm (its flat attitude rates,
+#: docs/ADAPTIVE_BASELINES.md); the ablations -sat, -type1 1.71, -nolearn 114, -bias 0.41 mm. A broken law (a lost
+#: term, a sign) misses them.
 FLIGHT_RMSE_BOUND = {'nnit2fsmc': 6e-3, 'smc-sign': 0.018, 'smc-sat': 0.072, 'smc-integral': 4.5e-4,
                      'pid': 4e-3, 'se3': 4.6e-3, 'l1-se3': 6e-4, 'indi': 6.5e-3,
                      'nnit2fsmc-sat': 5.1e-3, 'nnit2fsmc-type1': 5.1e-3,
