@@ -277,7 +277,7 @@ def _margin_task(task) -> dict:
 
 def breaking_lines(path: Path, kinds, disturbances) -> list[str]:
     """Kind x disturbance: the breaking point (found: 'x (holds at y)'; none up to the range's end: '> x';
-    already below 90 % at the low end: '<= x'), from stress's breaking_points.csv."""
+    already below 90 % at the low end: '<= x'; no search yet: 'not flown'), from stress's breaking_points.csv."""
     if not path.exists():
         return ['(no breaking point flown yet)']
     with path.open(newline='') as stream:
@@ -290,7 +290,7 @@ def breaking_lines(path: Path, kinds, disturbances) -> list[str]:
         for d in disturbances:
             row = rows.get((d, kind))
             if row is None:
-                cells.append('-')
+                cells.append('not flown')
             elif row['status'] == 'found':
                 cells.append(f'{float(row["fails_at"]):g} (holds at {float(row["holds_at"]):g})')
             elif row['status'] == 'above_range':
