@@ -166,9 +166,10 @@ def test_indi_rejects_a_vertical_force_step_through_the_measurement_stage_as_its
 def roll_pitch_command_spread(kind: str, velocity_noise: float, duration: float = 3.0) -> float:
     """The standard deviation of U2 and U3 [N] (the larger) over the last second of ``duration`` [s] of hover at
     1 m (from the ground) by ``kind`` on the nominal vehicle, its measured velocity carrying white noise of
-    ``velocity_noise`` [m/s] (seeded), read through the measurement stage."""
+    ``velocity_noise`` [m/s] (seeded), read through the measurement stage; the untuned gains (matched at the same
+    small-signal slope: the laws compared, not two tunings)."""
     trajectory = make_scenario('hover', duration)
-    controller = build_controller(kind, VEHICLE, GAINS)
+    controller = build_controller(kind, VEHICLE, load_gains('untuned'))
     simulator = Simulator(QuadrotorModel(VEHICLE, DISTURBANCES), DT, trajectory.initial_state)
     noise = SensorNoise(SensorErrors(velocity=velocity_noise), SensorErrors(), np.random.default_rng(3),
                         np.random.default_rng(4))
@@ -196,8 +197,10 @@ ADAPTATION_RATE = 1.0
 
 
 def indi_gains_with(**indi):
-    """The packaged gains with the ``indi`` keys given."""
+    """The packaged gains with the untuned set's ``indi`` section (the filters, rotor model and gains these
+    tests derive their predictions for) and the ``indi`` keys given."""
     gains = copy.deepcopy(GAINS)
+    gains['indi'] = copy.deepcopy(load_gains('untuned')['indi'])
     gains['indi'].update(indi)
     return gains
 

@@ -147,7 +147,8 @@ def test_every_kind_flies_every_shipped_vehicle(name, kind):
     take up to 12 s to come back (`smc-sat` to the steady error its boundary layer leaves); every other kind
     ends within 3 cm of it here."""
     paper_style_smc = kind in ('smc-sign', 'smc-sat')
-    flight = fly(kind, 'hover', duration=12.0 if paper_style_smc else 8.0, vehicle=name)
+    duration = 12.0 if paper_style_smc else 14.0 if kind == 'pid' else 8.0   # pid: its tuned height loop (z ki
+    flight = fly(kind, 'hover', duration=duration, vehicle=name)             # 12.3 /s^3) settles in about 9 s
     assert flight.summary.get('failure') is None
     end, two_seconds_before = flight.state[-1], flight.state[flight.time <= flight.time[-1] - 2.0][-1]
     bound = {'nnit2fsmc-nolearn': 0.25, 'smc-sat': 0.1}.get(kind, 0.03)

@@ -26,7 +26,8 @@ from .se3 import SE3Controller
 
 DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controller.yaml'
 #: the named gains sets (``--gains NAME``; docs/SCOREBOARD.md): 'untuned' (the packaged gains before issue 26's
-#: tuning) and 'paper-faithful' (those with PAPER_FAITHFUL); 'packaged' is DEFAULT_CONTROLLER_FILE
+#: tuning), 'paper-faithful' (those with PAPER_FAITHFUL) and 'scoreboard' (every kind's tuned point, as the
+#: scoreboard flew them); 'packaged' is DEFAULT_CONTROLLER_FILE
 SHIPPED_GAINS = Path(__file__).resolve().parent / 'config' / 'gains'
 #: the NNIT2FSMC's ablations (docs/ADAPTIVE.md): the IT2 term replaced by -K sat(S / Phi), type-1 fuzzy
 #: (lower membership functions = upper ones), learning off, and a network whose only input is the bias
