@@ -3,6 +3,7 @@ nothing lost on Ctrl-C, --resume flies only what is missing, --replay equals its
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -99,6 +100,33 @@ def test_an_existing_campaign_is_only_continued_with_resume(reference_run, tmp_p
     other = SPEC.overridden(seed=3)
     with pytest.raises(ParameterError, match='another spec'):
         run_campaign(other, reference_run, RunOptions(workers=1, resume=True, progress=False))
+
+
+def test_a_resume_with_other_gains_or_another_vehicle_is_refused_naming_the_first_difference(reference_run, tmp_path):
+    """A resume that would mix two controllers under one name is refused; gains the campaign's controllers
+    do not read (another kind's section) resume, and fly nothing more."""
+    run = shutil.copytree(reference_run, tmp_path / 'run')
+    gains = load_gains()
+    gains['pid']['axes']['x']['kp'] *= 2.0
+    other_pid = tmp_path / 'pid.yaml'
+    other_pid.write_text(yaml.safe_dump(gains))
+    with pytest.raises(ParameterError, match=r'flew pid with other gains \(pid\.axes\.x\.kp: '):
+        run_campaign(SPEC, run, RunOptions(workers=1, resume=True, progress=False,
+                                                     gains_file=str(other_pid)))
+    gains = load_gains()
+    gains['se3']['axes']['x']['k_error'] *= 2.0
+    other_se3 = tmp_path / 'se3.yaml'
+    other_se3.write_text(yaml.safe_dump(gains))
+    before = (run / 'flights.csv').read_text()
+    outcome = run_campaign(SPEC, run, RunOptions(workers=1, resume=True, progress=False,
+                                                           gains_file=str(other_se3)))
+    assert outcome.flights_flown == 0 and (run / 'flights.csv').read_text() == before
+    heavier = yaml.safe_load((ROOT / 'ros2_ws/src/quad_msgs_bridge/quad_msgs_bridge/config/vehicle.yaml').read_text())
+    heavier['vehicle']['m'] = 0.5
+    vehicle = tmp_path / 'vehicle.yaml'
+    vehicle.write_text(yaml.safe_dump(heavier))
+    with pytest.raises(ParameterError, match=r'another vehicle file \(vehicle\.m: 0\.486 there, 0\.5 now\)'):
+        run_campaign(SPEC, run, RunOptions(workers=1, resume=True, progress=False, vehicle_file=str(vehicle)))
 
 
 def run_cli(*args, **kwargs):

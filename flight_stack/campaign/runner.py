@@ -25,12 +25,13 @@ import signal
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Iterator
 
 import yaml
 
+from nnit2fsmc_controller.factory import gains_flown_by
 from quad_msgs_bridge.vehicle_params import ParameterError
 
 from ..interrupts import stop_signals
@@ -40,6 +41,8 @@ from .results import FLIGHTS_FILE, SUMMARY_FILE, FlightsFile, read_flights, summ
 from .spec import CampaignSpec
 
 SPEC_FILE = 'spec.yaml'
+#: what a campaign flies beyond its spec (:func:`campaign_inputs`): a resume must fly the same
+INPUTS_FILE = 'inputs.yaml'
 LOCK_FILE = '.campaign.lock'
 MAX_BATCH_SIZE = 1000           #: the default batch size's cap (flights stepped together; what an interruption may lose per worker)
 #: batches handed to the workers ahead of the ones flying, per worker (a bound on what waits in memory)
@@ -105,10 +108,49 @@ def holds_campaign(out_dir: Path) -> bool:
     return (out_dir / FLIGHTS_FILE).exists() or (out_dir / SPEC_FILE).exists()
 
 
-def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
+def campaign_inputs(spec: CampaignSpec, setup: CampaignSetup) -> dict:
+    """What a campaign flies beyond its spec, as plain data: the nominal vehicle and its section IV
+    disturbances (the vehicle file's values) and, per controller, the gains it flies (the ``common`` section
+    and its own: :func:`gains_flown_by`, so a gains file changed only in another kind's section still
+    resumes)."""
+    document = {'vehicle': asdict(setup.nominal), 'disturbances': asdict(setup.disturbances),
+                'gains': {kind: gains_flown_by(kind, setup.gains) for kind in spec.controllers}}
+    return json.loads(json.dumps(document, default=lambda value: value.tolist()))
+
+
+def _first_difference(stored, now, path: str = '') -> str:
+    """The first key (dotted) where two plain documents differ, with both values."""
+    if isinstance(stored, dict) and isinstance(now, dict):
+        for key in sorted(set(stored) | set(now), key=str):
+            if stored.get(key) != now.get(key):
+                return _first_difference(stored.get(key), now.get(key), f'{path}.{key}' if path else str(key))
+    return f'{path}: {stored!r} there, {now!r} now'
+
+
+def check_inputs(out_dir: Path, inputs: dict) -> None:
+    """ParameterError if the campaign in ``out_dir`` flew another vehicle or, for a controller of ``inputs``,
+    other gains (its INPUTS_FILE; a folder written before that file existed is not checked)."""
+    path = out_dir / INPUTS_FILE
+    if not path.exists():
+        return
+    stored = yaml.safe_load(path.read_text()) or {}
+    for part in ('vehicle', 'disturbances'):
+        if stored.get(part) != inputs[part]:
+            raise ParameterError(f'--resume: the campaign in {out_dir} flew another vehicle file '
+                                 f'({_first_difference(stored.get(part), inputs[part], part)}); resume it with '
+                                 'the same --vehicle')
+    for kind, gains in inputs['gains'].items():
+        flown = stored.get('gains', {}).get(kind)
+        if flown is not None and flown != gains:
+            raise ParameterError(f'--resume: the campaign in {out_dir} flew {kind} with other gains '
+                                 f'({_first_difference(flown, gains)}); resume it with the same --gains')
+
+
+def check_output(spec: CampaignSpec, out_dir: Path, resume: bool, inputs: dict | None = None) -> None:
     """ParameterError if ``out_dir`` cannot take this campaign (touches nothing): it is a file, or it holds a
-    campaign and ``resume`` is off, or it holds another spec's campaign, or ``resume`` is on and it holds
-    no campaign (a mistyped path would otherwise start afresh)."""
+    campaign and ``resume`` is off, or it holds another spec's campaign, or one flown with other
+    ``inputs`` (:func:`campaign_inputs`, checked when given), or ``resume`` is on and it holds no campaign
+    (a mistyped path would otherwise start afresh)."""
     if out_dir.exists() and not out_dir.is_dir():
         raise ParameterError(f'--out: {out_dir} exists and is not a folder; choose another --out')
     base = out_dir
@@ -128,19 +170,22 @@ def check_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> None:
         if stored != spec.to_mapping():
             raise ParameterError(f'--resume: the campaign in {out_dir} was run with another spec '
                                  f'({spec_path}); resume it with the same spec and overrides')
+        if inputs is not None:
+            check_inputs(out_dir, inputs)
 
 
-def prepare_output(spec: CampaignSpec, out_dir: Path, resume: bool) -> set:
+def prepare_output(spec: CampaignSpec, out_dir: Path, resume: bool, inputs: dict) -> set:
     """Check (and create) the output folder; the (flight, controller) pairs already flown there.
 
     A folder that already holds a campaign is only continued with ``resume``, and only if its spec
-    is the same one (overrides included).
+    is the same one (overrides included) and it flew the same vehicle and gains (``inputs``).
     """
-    check_output(spec, out_dir, resume)
+    check_output(spec, out_dir, resume, inputs)
     out_dir.mkdir(parents=True, exist_ok=True)
     if not os.access(out_dir, os.W_OK):
         raise ParameterError(f'--out: {out_dir} is not writable')
     (out_dir / SPEC_FILE).write_text(yaml.safe_dump(spec.to_mapping(), sort_keys=False))
+    (out_dir / INPUTS_FILE).write_text(yaml.safe_dump(inputs, sort_keys=False))
     return {(r['flight'], r['controller']) for r in read_flights(out_dir / FLIGHTS_FILE)}
 
 
@@ -298,19 +343,21 @@ def run_campaign(spec: CampaignSpec, out_dir: Path, options: RunOptions) -> Camp
     if options.scheduler is None:
         check_main_is_guarded()
     # files, rates and every controller's gains valid before flying
-    CampaignSetup.of(spec, options.vehicle_file, options.gains_file).check_controllers(spec.controllers)
-    check_output(spec, out_dir, options.resume)
+    setup = CampaignSetup.of(spec, options.vehicle_file, options.gains_file)
+    setup.check_controllers(spec.controllers)
+    inputs = campaign_inputs(spec, setup)
+    check_output(spec, out_dir, options.resume, inputs)
     with stop_signals():   # SIGTERM stops it as Ctrl-C does: workers stopped, flights.csv closed
         if options.scheduler is not None:
             with writing(out_dir):
-                return _fly_missing(spec, out_dir, options, workers, _DaskPool(options.scheduler))
+                return _fly_missing(spec, out_dir, options, workers, _DaskPool(options.scheduler), inputs)
         # the local workers start now, and import the stack while the kernels compile here
         pool = _LocalPool(min(workers, max(1, math.ceil(flights_to_fly(spec, set())
                                                         / batch_size(spec, options, workers)))))
         try:
             _compile(spec, options)
             with writing(out_dir):
-                return _fly_missing(spec, out_dir, options, workers, pool)
+                return _fly_missing(spec, out_dir, options, workers, pool, inputs)
         finally:
             pool.close(cancel=True)    # after a whole campaign: nothing left to stop
 
@@ -325,9 +372,10 @@ def _compile(spec: CampaignSpec, options: RunOptions) -> None:
     say(f'{time.perf_counter() - started:.1f} s (the worker processes load them from the cache)')
 
 
-def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers: int, pool) -> CampaignOutcome:
+def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers: int, pool,
+                 inputs: dict) -> CampaignOutcome:
     """Fly the missing flights on ``pool`` into ``out_dir``, then write the results while its workers exit."""
-    done = prepare_output(spec, out_dir, options.resume)
+    done = prepare_output(spec, out_dir, options.resume, inputs)
     total = flights_to_fly(spec, done)
     jobs = plan_jobs(spec, done, options, workers)
     flights = FlightsFile(out_dir / FLIGHTS_FILE, COLUMNS)

@@ -26,8 +26,8 @@ from .se3 import SE3Controller
 
 DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controller.yaml'
 #: the named gains sets (``--gains NAME``; docs/SCOREBOARD.md): 'untuned' (the packaged gains before issue 26's
-#: tuning), 'paper-faithful' (those with PAPER_FAITHFUL) and 'scoreboard' (every kind's tuned point, as the
-#: scoreboard flew them); 'packaged' is DEFAULT_CONTROLLER_FILE
+#: tuning) and 'paper-faithful' (those with PAPER_FAITHFUL); 'packaged' is DEFAULT_CONTROLLER_FILE (every
+#: kind's tuned point, as the scoreboard flew them)
 SHIPPED_GAINS = Path(__file__).resolve().parent / 'config' / 'gains'
 #: the NNIT2FSMC's ablations (docs/ADAPTIVE.md): the IT2 term replaced by -K sat(S / Phi), type-1 fuzzy
 #: (lower membership functions = upper ones), learning off, and a network whose only input is the bias
@@ -330,6 +330,22 @@ def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt
         max_rate=_non_negative(gains, f'{key}.max_adaptation_rate') * dt)
     return NNIT2FSMCLaw(lam, fuzzy, network, bias_only=kind == 'nnit2fsmc-bias',
                         feedforward=axis in FEEDFORWARD_AXES and _flag(gains, 'nnit2fsmc.acceleration_feedforward'))
+
+
+#: the gains section each kind's laws read (:func:`build_controller`); every kind also reads ``common``
+GAINS_SECTIONS = {'nnit2fsmc': 'nnit2fsmc', **{kind: 'nnit2fsmc' for kind in ABLATIONS}, 'smc-sign': 'smc',
+                  'smc-sat': 'smc', 'smc-integral': 'smc_integral', 'pid': 'pid', 'se3': SE3Controller.GAINS_SECTION,
+                  'l1-se3': L1SE3Controller.GAINS_SECTION, 'indi': 'indi'}
+
+
+def gains_flown_by(kind: str, gains: Mapping[str, Any]) -> dict[str, Any]:
+    """The gains ``kind`` flies, flattened ({'common.control_rate': 500.0, 'pid.axes.x.kp': ...}): the
+    ``common`` section and the kind's own (GAINS_SECTIONS), so two gains files that differ elsewhere fly
+    it the same."""
+    if kind not in GAINS_SECTIONS:
+        raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
+    read = ('common', GAINS_SECTIONS[kind])
+    return {name: value for name, value in flatten_gains(gains).items() if name.split('.')[0] in read}
 
 
 def flatten_gains(gains: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
