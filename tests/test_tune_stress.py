@@ -14,7 +14,9 @@ from flight_stack.campaign.results import read_flights, wilson_interval
 from flight_stack.campaign.runner import RunOptions, run_campaign
 from flight_stack.campaign.sampling import sample_conditions
 from flight_stack.campaign.spec import parse_spec
-from flight_stack.campaign.stress import KINDS, StressSetup, Tally, find_breaking_point, highest_intensity, stress
+from flight_stack.campaign.stress import (KINDS, BreakingPoint, StressSetup, Tally, find_breaking_point,
+                                          highest_intensity, read_tries, stress, write_breaking_points,
+                                          write_tries)
 from flight_stack.campaign.tune import TuneSetup, objective, tune
 from nnit2fsmc_controller.factory import build_controller, load_gains
 from nnit2fsmc_controller.search_spaces import SEARCH_SPACES, search_space, values_in, with_values
@@ -200,6 +202,23 @@ def test_stress_runs_on_a_tiny_real_campaign(scheduler, tmp_path):
         low, high = wilson_interval(int(row['successes']), int(row['flights']))
         assert (float(row['wilson95_low']), float(row['wilson95_high'])) == pytest.approx((low, high))
     assert (tmp_path / 'stress-mass.png').stat().st_size > 0
+
+
+def test_a_search_controller_by_controller_keeps_every_controllers_rows(tmp_path):
+    setup = StressSetup(CALM, KINDS['wind'], ('pid',), tmp_path, RunOptions(), 0.0, 20.0, 0.25)
+    first = {'pid': BreakingPoint('found', 5.0, 10.0, {5.0: Tally(20, 20), 10.0: Tally(3, 20)})}
+    second = {'se3': BreakingPoint('above_range', 20.0, math.nan, {20.0: Tally(19, 20)})}
+    again = {'pid': BreakingPoint('found', 5.0, 7.5, {5.0: Tally(20, 20), 7.5: Tally(10, 20)})}
+    for results in (first, second, again):
+        write_tries(setup, results)
+        write_breaking_points(setup, results)
+    with (tmp_path / 'stress-wind.csv').open() as stream:
+        tries = [(r['controller'], float(r['intensity']), int(r['successes'])) for r in csv.DictReader(stream)]
+    assert sorted(tries) == [('pid', 5.0, 20), ('pid', 7.5, 10), ('se3', 20.0, 19)]   # pid's rows replaced
+    assert read_tries(tmp_path / 'stress-wind.csv') == {'se3': {20.0: Tally(19, 20)}, 'pid': again['pid'].tries}
+    with (tmp_path / 'breaking_points.csv').open() as stream:
+        rows = {r['controller']: r['status'] for r in csv.DictReader(stream)}
+    assert rows == {'pid': 'found', 'se3': 'above_range'}
 
 
 @pytest.mark.parametrize('vehicle, message', [

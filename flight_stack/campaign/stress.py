@@ -201,9 +201,9 @@ def stress(setup: StressSetup, progress: bool = True) -> dict[str, BreakingPoint
             return result
         results[controller] = find_breaking_point(rate_at, setup.low, setup.high, setup.resolution)
         say(f'stress {kind.name}: {controller}: {describe(results[controller], kind)}')
-    write_tries(setup, results)
+    tries = write_tries(setup, results)
     write_breaking_points(setup, results)
-    plot_success(setup, results)
+    plot_success(setup, read_tries(tries))
     return results
 
 
@@ -216,13 +216,23 @@ def describe(point: BreakingPoint, kind: DisturbanceKind) -> str:
     return f'already below {BREAKING_SHARE:.0%} at {point.high:g} ({kind.intensity}): an upper bound'
 
 
+TRIES_COLUMNS = ('kind', 'controller', 'intensity', 'flights', 'successes', 'success_share', 'wilson95_low',
+                 'wilson95_high')
+
+
 def write_tries(setup: StressSetup, results: dict[str, BreakingPoint]) -> Path:
-    """``DIR/stress-<kind>.csv``: every try (controller, intensity, flights, successes, share, interval)."""
+    """``DIR/stress-<kind>.csv``: every try (controller, intensity, flights, successes, share, interval); the
+    rows of controllers not searched this time stay (a search run controller by controller keeps them all)."""
     path = setup.out_dir / f'stress-{setup.kind.name}.csv'
+    kept = []
+    if path.exists():
+        with path.open(newline='') as stream:
+            kept = [[row[c] for c in TRIES_COLUMNS] for row in csv.DictReader(stream)
+                    if row['controller'] not in results]
     with path.open('w', newline='') as stream:
         writer = csv.writer(stream, lineterminator='\n')
-        writer.writerow(['kind', 'controller', 'intensity', 'flights', 'successes', 'success_share',
-                         'wilson95_low', 'wilson95_high'])
+        writer.writerow(TRIES_COLUMNS)
+        writer.writerows(kept)
         for controller, point in results.items():
             for x in sorted(point.tries):
                 t = point.tries[x]
@@ -255,9 +265,20 @@ def write_breaking_points(setup: StressSetup, results: dict[str, BreakingPoint])
     return path
 
 
-def plot_success(setup: StressSetup, results: dict[str, BreakingPoint]) -> Path | None:
-    """``DIR/stress-<kind>.png``: success share against intensity, a curve per controller with its 95 %
-    Wilson interval, the 90 % line; None (said) without matplotlib."""
+def read_tries(path: Path) -> dict[str, dict[float, Tally]]:
+    """{controller: {intensity: Tally}} from a ``DIR/stress-<kind>.csv`` (:func:`write_tries`)."""
+    tries: dict[str, dict[float, Tally]] = {}
+    with path.open(newline='') as stream:
+        for row in csv.DictReader(stream):
+            tries.setdefault(row['controller'], {})[float(row['intensity'])] = Tally(int(row['successes']),
+                                                                                     int(row['flights']))
+    return tries
+
+
+def plot_success(setup: StressSetup, tries: dict[str, dict[float, Tally]]) -> Path | None:
+    """``DIR/stress-<kind>.png``: success share against intensity, a curve per controller ({controller:
+    {intensity: Tally}}, :func:`read_tries`) with its 95 % Wilson interval, the 90 % line; None (said)
+    without matplotlib."""
     try:
         import matplotlib
         matplotlib.use('Agg')
@@ -266,12 +287,12 @@ def plot_success(setup: StressSetup, results: dict[str, BreakingPoint]) -> Path 
         print('stress: no plot (pip install matplotlib)', file=sys.stderr)
         return None
     figure, axes = plt.subplots(figsize=(7, 4.2))
-    for controller, point in results.items():
-        xs = sorted(point.tries)
-        shares = [point.tries[x].share for x in xs]
+    for controller, tried in tries.items():
+        xs = sorted(tried)
+        shares = [tried[x].share for x in xs]
         # the interval's ends as distances from the share (rounding may put an end a hair past it)
-        below = [max(0.0, share - point.tries[x].interval[0]) for x, share in zip(xs, shares)]
-        above = [max(0.0, point.tries[x].interval[1] - share) for x, share in zip(xs, shares)]
+        below = [max(0.0, share - tried[x].interval[0]) for x, share in zip(xs, shares)]
+        above = [max(0.0, tried[x].interval[1] - share) for x, share in zip(xs, shares)]
         axes.errorbar(xs, shares, yerr=[below, above], marker='o', capsize=3, label=controller)
     axes.axhline(BREAKING_SHARE, color='grey', linestyle='--', linewidth=1, label=f'{BREAKING_SHARE:.0%}')
     axes.set_xlabel(setup.kind.intensity)
