@@ -43,6 +43,7 @@ import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -69,21 +70,43 @@ MARKERS = ('<!-- scoreboard:begin (bench/scoreboard.py writes this section) -->'
 MARGIN_FLIGHTS = 2 * (2 + 8)
 
 
-# --- 1. package: each kind's best tuned point onto the packaged gains file --------------------------------
+# --- 1. package: each kind's best accepted tuned point onto the packaged gains file --------------------------------
 
-def best_point(trials_csv: Path, kind: str) -> tuple[dict, dict]:
-    """(point {dimension: value}, its row) of the best complete trial of a ``run_stack.py tune`` trials table
-    (the lowest objective; the earlier trial on a tie, as Optuna's best trial)."""
+def ranked_points(trials_csv: Path, kind: str) -> list[tuple[dict, dict]]:
+    """[(point {dimension: value}, its row)] of every complete trial of a ``run_stack.py tune`` trials table,
+    best first (the lowest objective; the earlier trial on a tie, as Optuna's best trial)."""
     with trials_csv.open(newline='') as stream:
         rows = [row for row in csv.DictReader(stream) if row['state'] == 'complete']
     if not rows:
         raise ParameterError(f'{trials_csv}: no complete trial')
-    best = min(rows, key=lambda row: (float(row['objective_m']), int(row['trial'])))
+    rows.sort(key=lambda row: (float(row['objective_m']), int(row['trial'])))
     names = [d.name for d in search_space(kind)]
-    missing = [name for name in names if name not in best]
+    missing = [name for name in names if name not in rows[0]]
     if missing:
         raise ParameterError(f'{trials_csv}: no column {missing[0]} ({kind}\'s search space: {", ".join(names)})')
-    return {name: float(best[name]) for name in names}, best
+    return [({name: float(row[name]) for name in names}, row) for row in rows]
+
+
+#: what a tuned point must also do before it is packaged: the ``hover`` scenario (a 1 m take-off step,
+#: which the campaign's slowly climbing helix never asks for) on every shipped vehicle, with its section IV
+#: disturbances, for ACCEPTANCE_DURATION_S, ending within ACCEPTANCE_ERROR_M of the hover point and not failed
+ACCEPTANCE_SCENARIO, ACCEPTANCE_DURATION_S, ACCEPTANCE_ERROR_M = 'hover', 14.0, 0.10
+
+
+def hover_acceptance(kind: str, gains: dict) -> str | None:
+    """None if ``kind`` with ``gains`` (a whole gains tree) passes the acceptance on every shipped vehicle,
+    else what failed ('x500: flipped over at 0.31 s')."""
+    from flight_stack.api import fly
+    from quad_msgs_bridge.vehicle_params import shipped_vehicles
+    for vehicle in shipped_vehicles():
+        flight = fly(kind, ACCEPTANCE_SCENARIO, duration=ACCEPTANCE_DURATION_S, vehicle=vehicle, gains=gains)
+        failure = flight.summary.get('failure')
+        if failure:
+            return f'{vehicle}: {failure} at {flight.time[-1]:.2f} s'
+        error = math.dist(flight.state[-1][:3], flight.reference_position[-1])
+        if error > ACCEPTANCE_ERROR_M:
+            return f'{vehicle}: {100 * error:.1f} cm from the hover point at {ACCEPTANCE_DURATION_S:g} s'
+    return None
 
 
 def set_in_text(text: str, values: dict[str, float]) -> str:
@@ -141,26 +164,42 @@ def set_in_text(text: str, values: dict[str, float]) -> str:
     return '\n'.join(lines)
 
 
-def package(root: Path, kinds, into: Path, trials_to: Path | None) -> list[str]:
-    """Apply each kind's best point (``root/tune-KIND/trials-KIND.csv``) to the gains file ``into`` by its
-    dimension names; checks that the file then holds exactly those gains changed. The report's lines."""
+def package(root: Path, kinds, into: Path, trials_to: Path | None,
+            accept: Callable[[str, dict], str | None] = hover_acceptance) -> list[str]:
+    """Apply each kind's best accepted point (``root/tune-KIND/trials-KIND.csv``: the complete trial of the
+    lowest objective for which ``accept(kind, gains)`` says None, :func:`hover_acceptance`) to the gains
+    file ``into`` by its dimension names; checks that the file then holds exactly those gains changed. The
+    report's lines (each says which better trials failed the acceptance, and how)."""
     base = load_gains(into)
     text = into.read_text()
     expected = base
     report = []
     for kind in kinds:
         trials = root / f'tune-{kind}' / f'trials-{kind}.csv'
-        point, row = best_point(trials, kind)
+        refused = []
+        for point, row in ranked_points(trials, kind):
+            why = accept(kind, with_values(expected, kind, point))
+            if why is None:
+                break
+            refused.append(f'trial {row["trial"]} ({100 * float(row["objective_m"]):.3f} cm): {why}')
+        else:
+            raise ParameterError(f'{trials}: no complete trial passes the acceptance ({"; ".join(refused)})')
         expected = with_values(expected, kind, point)
         text = set_in_text(text, {gain: point[d.name] for d in search_space(kind) for gain in d.gains})
         report.append(f'{kind}: trial {row["trial"]}, objective {100 * float(row["objective_m"]):.3f} cm '
                       f'({row["finished"]}/{row["flights"]} finished): '
-                      + ', '.join(f'{name} = {value:.4g}' for name, value in point.items()))
+                      + ', '.join(f'{name} = {value:.4g}' for name, value in point.items())
+                      + (f' (better trials failing the {ACCEPTANCE_SCENARIO} acceptance: {"; ".join(refused)})'
+                         if refused else ''))
         if trials_to is not None:
             trials_to.mkdir(parents=True, exist_ok=True)
             shutil.copyfile(trials, trials_to / trials.name)
-    kept = [line for line in text.split('\n') if not line.startswith(PROVENANCE)]
-    text = '\n'.join([PROVENANCE + line for line in report] + kept)
+    # the provenance lines: the kinds packaged now replace theirs, the others' stay, in the kinds' order
+    lines = text.split('\n')
+    provenance = {line[len(PROVENANCE):].split(':')[0]: line for line in lines if line.startswith(PROVENANCE)}
+    provenance.update({kind: PROVENANCE + line for kind, line in zip(kinds, report)})
+    ordered = [provenance.pop(kind) for kind in KINDS if kind in provenance] + list(provenance.values())
+    text = '\n'.join(ordered + [line for line in lines if not line.startswith(PROVENANCE)])
     with tempfile.TemporaryDirectory() as folder:
         check = Path(folder) / 'gains.yaml'
         check.write_text(text)

@@ -159,12 +159,12 @@ def test_each_kinds_own_campaign_flies_the_same_perturbed_flights(scheduler, tmp
 # --- named gains sets --------------------------------------------------------------------------------------
 
 def test_the_named_gains_sets_are_found_by_name_and_hold_every_gain(tmp_path, monkeypatch):
-    assert set(shipped_gains()) == {'packaged', 'untuned', 'paper-faithful', 'scoreboard'}
+    assert set(shipped_gains()) == {'packaged', 'untuned', 'paper-faithful'}
     assert locate_gains('packaged') == locate_gains(None) == DEFAULT_CONTROLLER_FILE
     assert locate_gains('untuned.yaml') == shipped_gains()['untuned']
     for name in shipped_gains():
         assert set(flatten_gains(load_gains(name))) == set(gain_names()), name   # complete: nothing falls back
-    with pytest.raises(ParameterError, match='named gains: packaged, paper-faithful, scoreboard, untuned'):
+    with pytest.raises(ParameterError, match='named gains: packaged, paper-faithful, untuned'):
         load_gains('nope')
     monkeypatch.chdir(tmp_path)
     (tmp_path / 'untuned').write_text(yaml.safe_dump({'common': {'control_rate': 500.0}}))
@@ -202,7 +202,7 @@ def test_package_puts_every_kinds_best_point_into_one_gains_file_keeping_its_com
         pruned = {d.name: d.low for d in space}
         write_trials(tmp_path, kind, [('complete', 0.05, worse), ('pruned', 0.001, pruned), ('complete', 0.03, best)])
         expected = with_values(expected, kind, best)
-    report = scoreboard.package(tmp_path, tuple(SEARCH_SPACES), into, tmp_path / 'kept')
+    report = scoreboard.package(tmp_path, tuple(SEARCH_SPACES), into, tmp_path / 'kept', accept=accept_every)
     assert flatten_gains(load_gains(into)) == flatten_gains(expected)
     assert values_in(load_gains(into), 'se3') != values_in(load_gains(into), 'l1-se3')   # each its own
     text = into.read_text()
@@ -212,8 +212,45 @@ def test_package_puts_every_kinds_best_point_into_one_gains_file_keeping_its_com
     assert text.startswith(scoreboard.PROVENANCE) and 'trial 2' in report[0]
     assert '# [Hz] controller update rate' in text
     assert sorted(p.name for p in (tmp_path / 'kept').iterdir()) == sorted(f'trials-{k}.csv' for k in SEARCH_SPACES)
-    scoreboard.package(tmp_path, ('pid',), into, None)                 # again: its header is replaced, not added
-    assert into.read_text().count(scoreboard.PROVENANCE) == 1
+    write_trials(tmp_path / 'again', 'pid', [('complete', 0.02, {d.name: d.high for d in search_space('pid')})])
+    scoreboard.package(tmp_path / 'again', ('pid',), into, None, accept=accept_every)
+    headers = [line for line in into.read_text().split('\n') if line.startswith(scoreboard.PROVENANCE)]
+    assert [h[len(scoreboard.PROVENANCE):].split(':')[0] for h in headers] == list(scoreboard.KINDS)
+    assert headers[1] == scoreboard.PROVENANCE + 'pid: trial 0, objective 2.000 cm (100/100 finished): ' + ', '.join(
+        f'{d.name} = {d.high:.4g}' for d in search_space('pid'))   # its header replaced, the others kept
+
+
+def accept_every(kind, gains):
+    """An acceptance that passes every point (the tests of packaging alone)."""
+    return None
+
+
+def test_package_takes_the_best_trial_that_passes_the_acceptance_and_says_which_failed(tmp_path):
+    space = search_space('pid')
+    best, second = ({d.name: d.low + (d.high - d.low) * f for d in space} for f in (0.25, 0.5))
+    write_trials(tmp_path, 'pid', [('complete', 0.03, second), ('complete', 0.02, best)])
+    into = tmp_path / 'controller.yaml'
+    into.write_text(DEFAULT_CONTROLLER_FILE.read_text())
+
+    def refuse_the_best(kind, gains):
+        return 'paper: flipped over at 0.5 s' if values_in(gains, kind) == pytest.approx(best) else None
+
+    report = scoreboard.package(tmp_path, ('pid',), into, None, accept=refuse_the_best)
+    assert values_in(load_gains(into), 'pid') == pytest.approx(second)
+    assert report[0].startswith('pid: trial 0, objective 3.000 cm')
+    assert 'failing the hover acceptance: trial 1 (2.000 cm): paper: flipped over at 0.5 s' in report[0]
+    with pytest.raises(ParameterError, match='no complete trial passes the acceptance'):
+        scoreboard.package(tmp_path, ('pid',), into, None, accept=lambda kind, gains: 'x500: crashed')
+    assert values_in(load_gains(into), 'pid') == pytest.approx(second)         # a refusal leaves it unchanged
+
+
+def test_the_hover_acceptance_refuses_the_se3_point_that_flips_on_the_take_off_step():
+    """The second round's best se3 trial (docs/tuning/2026-12-05, trial 12) flips on the 1 m take-off step
+    of the paper's vehicle; the packaged se3 point (its best trial that does not) holds every vehicle."""
+    ranked = scoreboard.ranked_points(ROOT / 'docs' / 'tuning' / '2026-12-05' / 'trials-se3.csv', 'se3')
+    trial_12 = next(point for point, row in ranked if row['trial'] == '12')
+    assert 'flipped over' in scoreboard.hover_acceptance('se3', with_values(load_gains(), 'se3', trial_12))
+    assert scoreboard.hover_acceptance('se3', load_gains()) is None
 
 
 def test_package_refuses_a_table_without_a_complete_trial(tmp_path):
@@ -221,7 +258,7 @@ def test_package_refuses_a_table_without_a_complete_trial(tmp_path):
     into = tmp_path / 'controller.yaml'
     into.write_text(DEFAULT_CONTROLLER_FILE.read_text())
     with pytest.raises(ParameterError, match='no complete trial'):
-        scoreboard.package(tmp_path, ('pid',), into, None)
+        scoreboard.package(tmp_path, ('pid',), into, None, accept=accept_every)
     assert into.read_text() == DEFAULT_CONTROLLER_FILE.read_text()
 
 
