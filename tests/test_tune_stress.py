@@ -59,6 +59,16 @@ def test_no_two_kinds_tune_the_same_gain_so_every_tuned_point_fits_one_gains_fil
                 assert owners.setdefault(gain, kind) == kind, f'{gain}: tuned by {owners[gain]} and {kind}'
 
 
+def test_an_ablation_searches_the_nnit2fsmc_space_and_its_point_is_the_nnit2fsmc_sections():
+    assert search_space('nnit2fsmc-bias') == search_space('nnit2fsmc')
+    point = {d.name: d.high for d in search_space('nnit2fsmc-bias')}
+    gains = with_values(load_gains(), 'nnit2fsmc-bias', point)
+    assert values_in(gains, 'nnit2fsmc') == point
+    assert build_controller('nnit2fsmc-bias', load_vehicle_file()[0], gains).kind == 'nnit2fsmc-bias'
+    with pytest.raises(ParameterError, match="'smc-sat' has no search space"):
+        search_space('smc-sat')
+
+
 def test_l1_se3_flies_its_own_se3_gains_not_those_of_se3():
     params = load_vehicle_file()[0]
     assert load_gains('untuned')['l1_se3']['axes'] == load_gains('untuned')['se3']['axes']   # as they flew before

@@ -93,10 +93,16 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
 
 
 def search_space(kind: str) -> tuple[Dimension, ...]:
-    """The search space of ``kind``; ParameterError naming the kinds that have one."""
+    """The search space of ``kind``; ParameterError naming the kinds that have one. An ablation of the
+    NNIT2FSMC (factory.ABLATIONS) reads the same ``nnit2fsmc`` section and searches its space: tuned alone
+    (``run_stack.py tune --controller nnit2fsmc-bias``), it gets the NNIT2FSMC's budget, and its point goes
+    to its own gains file (it is not packaged: it would overwrite the NNIT2FSMC's)."""
+    from .factory import ABLATIONS
+    if kind in ABLATIONS:
+        return SEARCH_SPACES['nnit2fsmc']
     if kind not in SEARCH_SPACES:
-        raise ParameterError(f'--controller: {kind!r} has no search space (tunable: {", ".join(SEARCH_SPACES)}; '
-                             'nnit2fsmc_controller/search_spaces.py declares them)')
+        raise ParameterError(f'--controller: {kind!r} has no search space (tunable: {", ".join(SEARCH_SPACES)} '
+                             'and the NNIT2FSMC\'s ablations; nnit2fsmc_controller/search_spaces.py declares them)')
     return SEARCH_SPACES[kind]
 
 
