@@ -64,7 +64,7 @@ def test_an_ablation_searches_the_nnit2fsmc_space_and_its_point_is_the_nnit2fsmc
     point = {d.name: d.high for d in search_space('nnit2fsmc-bias')}
     gains = with_values(load_gains(), 'nnit2fsmc-bias', point)
     assert values_in(gains, 'nnit2fsmc') == point
-    assert build_controller('nnit2fsmc-bias', load_vehicle_file()[0], gains).kind == 'nnit2fsmc-bias'
+    assert build_controller('nnit2fsmc-bias', load_vehicle_file()[0], gains).name == 'nnit2fsmc-bias'
     with pytest.raises(ParameterError, match="'smc-sat' has no search space"):
         search_space('smc-sat')
 
