@@ -70,7 +70,7 @@ MARKERS = ('<!-- scoreboard:begin (bench/scoreboard.py writes this section) -->'
 MARGIN_FLIGHTS = 2 * (2 + 8)
 
 
-# --- 1. package: each kind's best accepted tuned point onto the packaged gains file --------------------------------
+# --- 1. package: each kind's best accepted tuned point onto the packaged gains file ----------------------
 
 def ranked_points(trials_csv: Path, kind: str) -> list[tuple[dict, dict]]:
     """[(point {dimension: value}, its row)] of every complete trial of a ``run_stack.py tune`` trials table,

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import yaml
 
+from flight_stack.campaign.replay import replay_flight
 from flight_stack.campaign.results import read_flights, wilson_interval
 from flight_stack.campaign.runner import RunOptions, run_campaign
 from flight_stack.campaign.spec import parse_spec
@@ -113,6 +114,8 @@ def test_a_resume_with_other_gains_or_another_vehicle_is_refused_naming_the_firs
     with pytest.raises(ParameterError, match=r'flew pid with other gains \(pid\.axes\.x\.kp: '):
         run_campaign(SPEC, run, RunOptions(workers=1, resume=True, progress=False,
                                                      gains_file=str(other_pid)))
+    with pytest.raises(ParameterError, match=r'flew pid with other gains'):             # nor replayed with them
+        replay_flight(SPEC, run, 0, RunOptions(progress=False, gains_file=str(other_pid)))
     gains = load_gains()
     gains['se3']['axes']['x']['k_error'] *= 2.0
     other_se3 = tmp_path / 'se3.yaml'
@@ -166,7 +169,6 @@ def test_ctrl_c_keeps_every_finished_batch_and_resume_flies_the_rest(reference_r
 
 @pytest.mark.slow
 def test_replay_flies_one_flight_on_the_embedded_path_with_its_row_s_metrics(reference_run):
-    from flight_stack.campaign.replay import replay_flight
     status = replay_flight(SPEC, reference_run, 3, RunOptions(progress=False))
     rows = rows_by_key(reference_run)
     for controller in ('nnit2fsmc', 'pid'):

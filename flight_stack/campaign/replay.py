@@ -21,7 +21,7 @@ from ..embedded import fly_embedded
 from ..summary import build_summary, write_summary
 from .batch import CampaignSetup
 from .results import FLIGHTS_FILE, read_flights
-from .runner import RunOptions
+from .runner import RunOptions, campaign_inputs, check_inputs
 from .sampling import build_perturbations, sample_conditions
 from .spec import CampaignSpec
 
@@ -35,6 +35,7 @@ def replay_flight(spec: CampaignSpec, out_dir: Path, flight: int, options: RunOp
     if not 0 <= flight < spec.flights:
         raise ParameterError(f'--replay: flight {flight} is not in the campaign (0 .. {spec.flights - 1})')
     setup = CampaignSetup.of(spec, options.vehicle_file, options.gains_file)
+    check_inputs(out_dir, campaign_inputs(spec, setup))   # the replay flies what the campaign flew
     rows = {(r['flight'], r['controller']): r for r in read_flights(out_dir / FLIGHTS_FILE)}
     status = 0
     nn_seed = int(setup.gains['nnit2fsmc']['seed'])   # the flights' NN seed (the campaign seed draws the conditions)
