@@ -3,8 +3,10 @@
 # - the whole suite twice: with the pinned (newest) numpy and with numpy 1.26.4, the version ROS 2 Jazzy users
 #   have on Ubuntu 24.04; where a ROS 2 Jazzy is sourced, its ROS tests run there against it;
 # - the ROS-marked tests once more in .venv-ros-wheels, on the PyPI ROS 2 wheels (requirements-ros-wheels.txt),
-#   which any machine can build: so the ROS half is tested without /opt/ros too. SKIP_ROS_WHEELS=1 leaves it out.
-# The three environments are set up at the same time; each run spreads its tests over one pytest-xdist worker per
+#   which any machine can build: so the ROS half is tested without /opt/ros too. SKIP_ROS_WHEELS=1 leaves it out;
+# - the tests of the plant rotorpy-batched (-m rotorpy_batched) once more in .venv-rotorpy-batched, which adds torch
+#   (requirements-rotorpy-batched.txt) to the test requirements. SKIP_ROTORPY_BATCHED=1 leaves it out.
+# The four environments are set up at the same time; each run spreads its tests over one pytest-xdist worker per
 # CPU (TEST_WORKERS=N sets another count; the tests sharing a module-scoped flight stay on one worker: conftest.py).
 # --quick (first argument): the lane to run before every commit: .venv only, without the tests marked slow or ros.
 # Each run says which ROS 2 it used. Extra arguments go to pytest; pytest's "no tests collected" (exit code 5,
@@ -14,7 +16,8 @@ cd "$(dirname "$0")/.."
 quick=0
 if [ "${1:-}" = --quick ]; then quick=1; shift; fi
 skip_wheels=${SKIP_ROS_WHEELS:-0}
-if [ $quick = 1 ]; then skip_wheels=1; fi
+skip_batched=${SKIP_ROTORPY_BATCHED:-0}
+if [ $quick = 1 ]; then skip_wheels=1; skip_batched=1; fi
 workers=${TEST_WORKERS:-$(nproc 2>/dev/null || echo 2)}
 parallel=(-n "$workers" --dist loadgroup)
 
@@ -29,6 +32,9 @@ if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels: installing the pinned PyPI ROS 2 wheels (requirements-ros-wheels.txt)"
   bash scripts/without_sourced_ros.sh bash scripts/setup_venv.sh .venv-ros-wheels requirements-ros-wheels.txt \
     --isolated & setups+=($!)
+fi
+if [ "$skip_batched" != 1 ]; then
+  bash scripts/setup_venv.sh .venv-rotorpy-batched requirements-rotorpy-batched.txt & setups+=($!)
 fi
 for setup in "${setups[@]}"; do wait "$setup"; done
 
@@ -72,5 +78,9 @@ done
 if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels, ROS tests only (-m ros): $(bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python tests/ros_support.py)"
   run_suite ros bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python
+fi
+if [ "$skip_batched" != 1 ]; then
+  echo "== .venv-rotorpy-batched, the plant rotorpy-batched's tests (-m rotorpy_batched): torch $(.venv-rotorpy-batched/bin/python -c 'import torch; print(torch.__version__)')"
+  run_suite rotorpy_batched .venv-rotorpy-batched/bin/python
 fi
 exit $status

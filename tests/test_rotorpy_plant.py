@@ -182,6 +182,16 @@ def test_the_campaign_key_plant_is_checked():
         parse_spec({**base, 'plant': 'rotorpy', 'vehicle': {'thrust_coefficient': 0.1}})
 
 
+def test_the_campaign_command_line_plant_overrides_the_specs():
+    from flight_stack.campaign.spec import parse_spec
+    base = {'scenario': 'hover', 'controllers': ['pid'], 'flights': 1}
+    assert parse_spec(base).overridden(plant='rotorpy-batched').to_mapping()['plant'] == 'rotorpy-batched'
+    with pytest.raises(ParameterError, match="--plant: 'gazebo' is not a plant"):
+        parse_spec(base).overridden(plant='gazebo')
+    with pytest.raises(ParameterError, match='vehicle.thrust_coefficient: not with plant rotorpy-batched'):
+        parse_spec({**base, 'vehicle': {'thrust_coefficient': 0.1}}).overridden(plant='rotorpy-batched')
+
+
 def test_fly_refuses_an_unknown_plant():
     from flight_stack.api import fly
     with pytest.raises(ParameterError, match='--plant'):

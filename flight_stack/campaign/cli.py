@@ -9,6 +9,7 @@ from .runner import MAX_BATCH_SIZE
 
 from quad_msgs_bridge.output_path import output_path
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_sim.plants import PLANTS
 
 DESCRIPTION = """Fly a robustness campaign: every controller of the spec flies the same perturbed flights
 (true vehicle vs nominal model, wind, sensor noise, delay, motor lag), as numpy batches on local
@@ -38,6 +39,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--seed', type=int, default=None, help='campaign seed (overrides the spec)')
     parser.add_argument('--duration', type=float, default=None, help='sim time per flight [s] (overrides the spec)')
     parser.add_argument('--controllers', default=None, help='comma-separated controllers (overrides the spec)')
+    parser.add_argument('--plant', choices=PLANTS, default=None,
+                        help='what the simulator flies (overrides the spec\'s plant; docs/ROTORPY.md)')
     parser.add_argument('--workers', type=int, default=None, help='local worker processes (default: every core)')
     parser.add_argument('--batch-size', type=int, default=None,
                         help='flights stepped together per batch (default: an even share per worker, at most '
@@ -74,7 +77,7 @@ def main(argv: list[str]) -> int:
         if args.fail_below is not None:
             check_number('--fail-below', args.fail_below, 0.0, 1.0)
         spec = load_spec(args.spec).overridden(flights=args.flights, seed=args.seed, duration=args.duration,
-                                               controllers=args.controllers)
+                                               controllers=args.controllers, plant=args.plant)
         out_dir = args.out or Path('out') / f'campaign-{args.spec.stem}'
         options = RunOptions(workers=args.workers, batch_size=args.batch_size, scheduler=args.scheduler,
                              resume=args.resume, progress=not args.quiet,

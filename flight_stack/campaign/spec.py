@@ -149,9 +149,13 @@ class CampaignSpec:
         return self.wind_mean_speed_mps > 0.0 or self.turbulence != 'none'
 
     def overridden(self, *, flights: int | None = None, seed: int | None = None,
-                   duration: float | None = None, controllers: list[str] | None = None) -> 'CampaignSpec':
+                   duration: float | None = None, controllers: list[str] | None = None,
+                   plant: str | None = None) -> 'CampaignSpec':
         """The spec with the command-line overrides applied and validated."""
         spec = self
+        if plant is not None:
+            spec = replace(spec, plant=check_plant(plant, '--plant'))
+            _check_representable(spec)
         if flights is not None:
             spec = replace(spec, flights=_flights(flights, '--flights'))
         if seed is not None:
@@ -254,6 +258,14 @@ def _noise(value, key: str) -> NoiseLevel:
     return NoiseLevel(check_number(key, value, 0.0))
 
 
+def _check_representable(spec: CampaignSpec) -> None:
+    """ParameterError when the spec samples per-rotor coefficient errors and its plant is RotorPy's."""
+    unrepresentable = [key for key in ('thrust_coefficient', 'drag_coefficient') if key in spec.vehicle]
+    if spec.plant.startswith('rotorpy') and unrepresentable:
+        raise ParameterError(f'vehicle.{unrepresentable[0]}: not with plant {spec.plant} (RotorPy has one thrust and '
+                             'one torque coefficient for every rotor); leave it out or fly plant quad_sim')
+
+
 def _check_settling(spec: CampaignSpec, key: str) -> None:
     if spec.duration <= spec.settle_time:
         raise ParameterError(f'{key}: {spec.duration:g} s leaves nothing after the settling window '
@@ -308,10 +320,7 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
         measurement_filters=measurement_filters,
         plant=check_plant(top.get('plant', DEFAULT_PLANT), 'plant'),
         source=source)
-    unrepresentable = [key for key in ('thrust_coefficient', 'drag_coefficient') if key in spec.vehicle]
-    if spec.plant.startswith('rotorpy') and unrepresentable:
-        raise ParameterError(f'vehicle.{unrepresentable[0]}: not with plant rotorpy (RotorPy has one thrust and one '
-                             'torque coefficient for every rotor); leave it out or fly plant quad_sim')
+    _check_representable(spec)
     for key in LOSS_KEYS:
         if key in spec.vehicle and spec.vehicle[key].scale < 0.0:
             raise ParameterError(f'vehicle.{key}: a loss is a fraction in [0, 1), got {spec.vehicle[key].scale:g}')

@@ -1,7 +1,7 @@
 """Our vehicle, state and rotor thrusts <-> RotorPy's ``Multirotor`` (``rotorpy.vehicles.multirotor``).
 
-Pure functions, no RotorPy import: the plant (:mod:`quad_sim.rotorpy_plant`) is the only module that
-imports RotorPy, and everything it converts goes through here, once.
+Pure functions, no RotorPy import: the plants (:mod:`quad_sim.rotorpy_plant`, :mod:`quad_sim.rotorpy_batched_plant`)
+are the only modules that import RotorPy, and everything they convert goes through here, once.
 
 Frames and units on both sides:
 
@@ -34,7 +34,8 @@ from typing import Sequence
 
 import numpy as np
 
-from quad_msgs_bridge.frames import _body_rates, _euler, _euler_rates, _quaternion, check_orientation, check_pitch
+from quad_msgs_bridge.frames import (_body_rates, _euler, _euler_rates, _quaternion, check_orientation, check_pitch,
+                                     kernel_numbers)
 from quad_msgs_bridge.state import STATE_SIZE
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
 
@@ -146,26 +147,31 @@ def rotor_speeds_of(thrusts: np.ndarray, k_eta: float) -> np.ndarray:
     return np.sqrt(np.maximum(thrusts, 0.0) / k_eta)
 
 
-def rotorpy_state(state: Sequence[float], rotor_speeds: np.ndarray, air_velocity: Sequence[float] | None) -> dict:
-    """RotorPy's state dict of our 12-state ``state`` (one vehicle), the rotor speeds [rad/s] and the air velocity
-    [m/s, world ENU] (None: still air)."""
+def rotorpy_state(state: Sequence, rotor_speeds: np.ndarray, air_velocity: Sequence | None) -> dict:
+    """RotorPy's state dict of our 12-state ``state``, the rotor speeds [rad/s] and the air velocity [m/s, world ENU]
+    (None: still air). One vehicle (12 floats: vectors of shape (3,), (4,)) or a batch (12 arrays of B, rotor
+    speeds (B, 4), an air velocity of 3 floats or arrays of B: vectors of shape (B, 3), (B, 4), as RotorPy's
+    ``BatchedMultirotor`` takes them)."""
     if len(state) != STATE_SIZE:
         raise ValueError(f'state has {len(state)} components, expected {STATE_SIZE}')
-    x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = (float(v) for v in state)
-    return {'x': np.array([x, y, z]), 'v': np.array([vx, vy, vz]),
-            'q': np.array(_quaternion(phi, theta, psi)),
-            'w': np.array(_body_rates(phi, theta, dphi, dtheta, dpsi)),
-            'wind': np.zeros(3) if air_velocity is None else np.array(air_velocity, dtype=float),
-            'rotor_speeds': np.array(rotor_speeds, dtype=float)}
+    x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = kernel_numbers(*state)
+    position = np.stack([x, y, z], axis=-1)
+    wind = (np.zeros_like(position) if air_velocity is None
+            else np.stack([np.broadcast_to(np.asarray(a, dtype=float), np.shape(x)) for a in air_velocity], axis=-1))
+    return {'x': position, 'v': np.stack([vx, vy, vz], axis=-1),
+            'q': np.stack(_quaternion(phi, theta, psi), axis=-1),
+            'w': np.stack(_body_rates(phi, theta, dphi, dtheta, dpsi), axis=-1),
+            'wind': wind, 'rotor_speeds': np.array(rotor_speeds, dtype=float)}
 
 
-def state_from_rotorpy(rotorpy: dict) -> list[float]:
-    """Our 12-state of RotorPy's state dict; ValueError if its quaternion is no rotation or at gimbal lock."""
-    qx, qy, qz, qw = (float(v) for v in rotorpy['q'])
+def state_from_rotorpy(rotorpy: dict) -> list:
+    """Our 12-state of RotorPy's state dict: 12 floats of one vehicle (ValueError if its quaternion is no rotation
+    or at gimbal lock), or 12 arrays of a batch's (B, ...) vectors (NaN for a vehicle there)."""
+    qx, qy, qz, qw = kernel_numbers(*np.asarray(rotorpy['q'], dtype=float).T)
     phi, theta, psi, norm = _euler(qx, qy, qz, qw)
     check_orientation((qx, qy, qz, qw), norm)
-    p, q, r = (float(v) for v in rotorpy['w'])
+    p, q, r = kernel_numbers(*np.asarray(rotorpy['w'], dtype=float).T)
     dphi, dtheta, dpsi, cos_theta = _euler_rates(phi, theta, p, q, r)
     check_pitch(theta, cos_theta)
-    return [*(float(v) for v in rotorpy['x']), *(float(v) for v in rotorpy['v']), phi, theta, psi,
-            dphi, dtheta, dpsi]
+    return [*kernel_numbers(*np.asarray(rotorpy['x'], dtype=float).T),
+            *kernel_numbers(*np.asarray(rotorpy['v'], dtype=float).T), phi, theta, psi, dphi, dtheta, dpsi]

@@ -53,29 +53,52 @@ def one_vehicle(params: VehicleParams, b: int) -> VehicleParams:
     return replace(params, **{f.name: pick(getattr(params, f.name)) for f in fields(params)})
 
 
-def _batch_size(params: VehicleParams) -> int | None:
+def batch_vehicles(params: VehicleParams) -> list[VehicleParams]:
+    """The single vehicles of a batch description (arrays of B, see :meth:`VehicleParams.stack`): [params] for one."""
     sizes = {np.asarray(v).shape[0] for f in fields(params)
              for v in (getattr(params, f.name) if isinstance(getattr(params, f.name), tuple)
                        else (getattr(params, f.name),)) if isinstance(v, np.ndarray)}
-    return sizes.pop() if sizes else None
+    return [params] if not sizes else [one_vehicle(params, b) for b in range(sizes.pop())]
+
+
+def disturbance_wrench(disturbances: Disturbances):
+    """The section IV disturbance wrench as a function of time t [s]: (A_x, A_y, A_z) [N, world] and (A_phi,
+    A_theta, A_psi) [N m, about body x, y, z], A(t) = bias + amplitude sin(omega t), one numpy expression (a
+    RotorPy integrator asks for it several times per step)."""
+    channels = [disturbances.A_x, disturbances.A_y, disturbances.A_z, disturbances.A_phi, disturbances.A_theta,
+                disturbances.A_psi]
+    bias, amplitude, omega = (np.array([getattr(c, name) for c in channels]) for name in ('bias', 'amplitude', 'omega'))
+    return lambda t: bias + amplitude * np.sin(omega * t)
+
+
+#: the state components a vehicle that ends a step below the ground has at rest on it: z, its velocity, the rates
+_AT_REST_ON_GROUND = (2, 3, 4, 5, 9, 10, 11)
+
+
+def put_on_ground(state: list) -> list:
+    """Our 12-state (floats of one vehicle or arrays of a batch) with every vehicle below z = 0 put on the ground
+    at rest, as our model does."""
+    below = np.asarray(state[2]) < 0.0
+    if not below.any():
+        return state
+    if below.ndim == 0:
+        return [0.0 if i in _AT_REST_ON_GROUND else v for i, v in enumerate(state)]
+    return [np.where(below, 0.0, v) if i in _AT_REST_ON_GROUND else v for i, v in enumerate(state)]
 
 
 def _disturbed(multirotor_class, disturbances: Disturbances):
     """RotorPy's vehicle class plus the section IV disturbance wrench at time ``start`` + t (RotorPy's own class
-    when the disturbances are off). A(t) = bias + amplitude sin(omega t) of the six channels is one numpy
-    expression: the integrator asks for it 7 times per step."""
+    when the disturbances are off)."""
     if not disturbances.enabled:
         return multirotor_class
-    channels = [disturbances.A_x, disturbances.A_y, disturbances.A_z, disturbances.A_phi, disturbances.A_theta,
-                disturbances.A_psi]
-    bias, amplitude, omega = (np.array([getattr(c, name) for c in channels]) for name in ('bias', 'amplitude', 'omega'))
+    wrench = disturbance_wrench(disturbances)
 
     class DisturbedMultirotor(multirotor_class):
         start = 0.0
 
         def _s_dot_fn(self, t, s, cmd_rotor_speeds):
             s_dot = super()._s_dot_fn(t, s, cmd_rotor_speeds)
-            a = bias + amplitude * np.sin(omega * (self.start + t))
+            a = wrench(self.start + t)
             s_dot[3:6] += a[:3] / self.mass
             s_dot[10:13] += self.inv_inertia @ a[3:]
             return s_dot
@@ -110,11 +133,7 @@ class _Vehicle:
         after = self.multirotor.step(rotorpy_state(s, self.rotor_speeds, air_velocity),
                                      {'cmd_motor_thrusts': thrusts}, dt)
         self.rotor_speeds = after['rotor_speeds']
-        state = state_from_rotorpy(after)
-        if state[2] < 0.0:    # below the ground: put on it at rest, as our model does
-            state[2:6] = [0.0, 0.0, 0.0, 0.0]
-            state[9:12] = [0.0, 0.0, 0.0]
-        return state
+        return put_on_ground(state_from_rotorpy(after))
 
 
 class RotorPyPlant:
@@ -136,8 +155,7 @@ class RotorPyPlant:
         self.aero = aero
         self.params = params
         self.disturbances = disturbances
-        count = _batch_size(params)
-        singles = [params] if count is None else [one_vehicle(params, b) for b in range(count)]
+        singles = batch_vehicles(params)
         speeds = [None] * len(singles) if rotor_speeds is None else rotor_speeds
         self._vehicles = [_Vehicle(p, disturbances, aero, self.motor_time_constant_s, r)
                           for p, r in zip(singles, speeds)]
