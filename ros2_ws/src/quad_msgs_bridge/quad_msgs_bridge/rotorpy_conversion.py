@@ -130,15 +130,16 @@ def rotor_thrust_scales(params: VehicleParams) -> np.ndarray:
                                                                                  dtype=float))
 
 
-def motor_thrust_commands(forces: Sequence[float], params: VehicleParams,
-                          scales: np.ndarray | None = None) -> np.ndarray:
-    """RotorPy's ``cmd_motor_thrusts`` [N] (4,) for our commanded rotor thrusts F1..F4 [N].
+def motor_thrust_commands(forces, params: VehicleParams, scales: np.ndarray | None = None) -> np.ndarray:
+    """RotorPy's ``cmd_motor_thrusts`` [N] for our commanded rotor thrusts F1..F4 [N]: (4,) for one vehicle, (B, 4)
+    for the (B, 4) commands of a batch description (F_min, F_max floats or arrays of B).
 
     Each command is clipped to [F_min, F_max] (as our model does), then scaled by the rotor's thrust
     factor and efficiency (f_i (1 - l_i)): a weaker rotor gives less thrust and reaction torque for the
-    same command, as in our model. ``scales``: :func:`rotor_thrust_scales` of ``params``, when the caller
-    keeps it (the plant does, once per vehicle)."""
-    clipped = np.clip(np.asarray(forces, dtype=float), params.F_min, params.F_max)
+    same command, as in our model. ``scales``: :func:`rotor_thrust_scales` of ``params`` ((B, 4) for a batch),
+    when the caller keeps it (the plants do, once per vehicle)."""
+    low, high = (np.asarray(limit, dtype=float)[..., None] for limit in (params.F_min, params.F_max))
+    clipped = np.clip(np.asarray(forces, dtype=float), low, high)
     return clipped * (rotor_thrust_scales(params) if scales is None else scales)
 
 

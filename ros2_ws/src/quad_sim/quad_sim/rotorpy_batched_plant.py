@@ -20,9 +20,9 @@ from typing import Sequence
 
 import numpy as np
 
-from quad_msgs_bridge.rotorpy_conversion import (ROTORPY_MOTOR_TIME_CONSTANT, aero_coefficients, quad_params,
-                                                 rotor_speeds_of, rotor_thrust_scales, rotorpy_state,
-                                                 state_from_rotorpy)
+from quad_msgs_bridge.rotorpy_conversion import (ROTORPY_MOTOR_TIME_CONSTANT, aero_coefficients,
+                                                 motor_thrust_commands, quad_params, rotor_speeds_of,
+                                                 rotor_thrust_scales, rotorpy_state, state_from_rotorpy)
 from quad_msgs_bridge.state import STATE_SIZE
 from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams, check_number
 
@@ -87,7 +87,6 @@ class BatchedRotorPyPlant:
         count = len(singles)
         self._count = count
         self._scales = np.stack([rotor_thrust_scales(p) for p in singles])            # (B, 4)
-        self._limits = np.array([[p.F_min, p.F_max] for p in singles])                # (B, 2) [N]
         self._k_eta = np.array([q['k_eta'] for q in quads])[:, None]                   # (B, 1)
         self._speed_limits = np.array([[q['rotor_speed_min'], q['rotor_speed_max']] for q in quads])
         cpu = torch.device('cpu')
@@ -113,31 +112,26 @@ class BatchedRotorPyPlant:
             raise ValueError(f'plant rotorpy-batched: a batch of {count} states for {self._count} vehicles')
         states = np.array([np.broadcast_to(np.asarray(v, dtype=float), (count,)) for v in s])     # (12, B)
         commands = np.array([np.broadcast_to(np.asarray(f, dtype=float), (count,)) for f in forces]).T
-        thrusts = np.clip(commands, self._limits[:, :1], self._limits[:, 1:]) * self._scales       # (B, 4) [N]
+        thrusts = motor_thrust_commands(commands, self.params, self._scales)                      # (B, 4) [N]
         flying = np.flatnonzero(np.all(np.isfinite(states), axis=0))
         new = states.copy()
         if flying.size:
-            new[:, flying] = self._step(t, states[:, flying], thrusts[flying], dt, flying, air_velocity, count)
+            new[:, flying] = self._step(t, states, thrusts, dt, flying, air_velocity)
         return list(new[:, 0]) if single else list(new)
 
-    def _step(self, t, states, thrusts, dt, flying, air_velocity, count):
-        """The (12, n) states of the ``flying`` vehicles after RotorPy's step."""
+    def _step(self, t, states, thrusts, dt, flying, air_velocity):
+        """The (12, n) states of the ``flying`` vehicles after RotorPy's step of the whole batch's (12, B) states and
+        (B, 4) thrusts [N] (RotorPy steps the rows ``flying`` only; the others' values are not used)."""
         torch = self._torch
         if self.motor_time_constant_s == 0.0:
-            self.rotor_speeds[flying] = np.clip(rotor_speeds_of(thrusts, self._k_eta[flying]),
+            self.rotor_speeds[flying] = np.clip(rotor_speeds_of(thrusts[flying], self._k_eta[flying]),
                                                 self._speed_limits[flying, :1], self._speed_limits[flying, 1:])
-        air = None if air_velocity is None else [np.broadcast_to(np.asarray(a, dtype=float), (count,))[flying]
+        air = None if air_velocity is None else [np.broadcast_to(np.asarray(a, dtype=float), (self._count,))
                                                  for a in air_velocity]
-        before = rotorpy_state(list(states), self.rotor_speeds[flying], air)
-        full = {key: np.zeros((count, value.shape[-1])) for key, value in before.items()}
-        full['q'][:, 3] = 1.0
-        for key, value in before.items():
-            full[key][flying] = value
-        command = np.zeros((count, 4))
-        command[flying] = thrusts
+        before = rotorpy_state(list(states), self.rotor_speeds, air)
         self.multirotor.start = t   # (of no use to RotorPy's own class, when the disturbances are off)
-        after = self.multirotor.step({key: torch.from_numpy(value) for key, value in full.items()},
-                                     {'cmd_motor_thrusts': torch.from_numpy(command)}, dt, idxs=flying.tolist())
+        after = self.multirotor.step({key: torch.from_numpy(value) for key, value in before.items()},
+                                     {'cmd_motor_thrusts': torch.from_numpy(thrusts)}, dt, idxs=flying.tolist())
         after = {key: value.numpy()[flying] for key, value in after.items()}
         self.rotor_speeds[flying] = after['rotor_speeds']
         return np.array(put_on_ground(state_from_rotorpy(after)))
