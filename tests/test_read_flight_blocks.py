@@ -18,10 +18,12 @@ PARAMS = load_vehicle_file()[0]
 SLOPES = (1.0, 1.0, 2.0, 3.0, 3.0, 2.0)
 
 
-def write_synthetic_bag(path, steps: int, dt: float = 1e-3, every_frame_id=None, **custom):
+def write_synthetic_bag(path, steps: int, dt: float = 1e-3, every_frame_id=None, references: int | None = None,
+                        **custom):
     """A bag of ``steps`` control steps of a vehicle wobbling around a moving reference (no flight: the messages
     are what FlightBag writes for such steps). ``every_frame_id(k)``: the odometry's child frame id at step k
-    (the default one when None)."""
+    (the default one when None). ``references``: only the first that many steps' references are written (the
+    others lost, as those of a killed trajectory node)."""
     rng = np.random.default_rng(3)
     with FlightBag.create(path, PARAMS, 1.0, controller='nnit2fsmc', **custom) as bag:
         for k in range(steps):
@@ -33,6 +35,8 @@ def write_synthetic_bag(path, steps: int, dt: float = 1e-3, every_frame_id=None,
             diagnostics = [list(rng.standard_normal(6)) for _ in range(3)]
             if every_frame_id is not None:
                 bag._encode_odometry = odometry_encoder('odom', every_frame_id(k))
+            if references is not None and k == references:
+                bag._reference = None
             bag.record_step(odometry_from_state(t, state), forces, controls, (math.sin(t), math.cos(t), 1.0),
                             0.3 * t - 0.01, *diagnostics, SLOPES)
     return path
@@ -95,6 +99,17 @@ def test_a_topic_whose_layout_changes_is_read_message_by_message(tmp_path, monke
     monkeypatch.setattr(flight_from_bag, '_read_steps', lambda *a: taken.append(1) or original(*a))
     flight = read_flight(bag)
     assert taken and flight.steps == 500
+
+
+def test_steps_whose_reference_was_lost_are_left_out_the_same_both_ways(tmp_path, monkeypatch):
+    """The references end 1,000 steps before the other messages (a trajectory node killed mid flight): the
+    steps before read as usual, the others are left out and the reading says so, by blocks as by messages."""
+    bag = write_synthetic_bag(tmp_path / 'bag', 3000, references=2000)
+    blocks = read_flight(bag)
+    assert blocks.steps == 2000 and blocks.time[-1] == pytest.approx(1.999)
+    assert any('1000 control steps without odometry or reference' in note for note in blocks.warnings), \
+        blocks.warnings
+    assert_same_flight(blocks, read_by_messages(bag, monkeypatch))
 
 
 def test_a_non_finite_value_in_a_bag_is_refused_naming_the_topic(tmp_path):

@@ -208,12 +208,12 @@ def _read_steps(bag: Path, namespace: str | None, params: VehicleParams, settle_
 def _latest_index(stamps: np.ndarray, wanted: np.ndarray) -> np.ndarray:
     """Per wanted stamp, the index of the last entry of ``stamps`` with it (a later message of a stamp
     replaces an earlier one), or -1."""
+    if not len(stamps):                 # e.g. the references of a killed trajectory node ended before these steps
+        return np.full(len(wanted), -1)
     order = np.argsort(stamps, kind='stable')
     ordered = stamps[order]
     last = np.append(ordered[1:] != ordered[:-1], True)
     unique, index = ordered[last], order[last]
-    if not len(unique):
-        return np.full(len(wanted), -1)
     at = np.minimum(np.searchsorted(unique, wanted), len(unique) - 1)
     return np.where(unique[at] == wanted, index[at], -1)
 
