@@ -23,7 +23,7 @@ def write_synthetic_bag(path, steps: int, dt: float = 1e-3, every_frame_id=None,
     """A bag of ``steps`` control steps of a vehicle wobbling around a moving reference (no flight: the messages
     are what FlightBag writes for such steps). ``every_frame_id(k)``: the odometry's child frame id at step k
     (the default one when None). ``references``: only the first that many steps' references are written (the
-    others lost, as those of a killed trajectory node)."""
+    others lost, as a killed controller's last ones were by the recorder)."""
     rng = np.random.default_rng(3)
     with FlightBag.create(path, PARAMS, 1.0, controller='nnit2fsmc', **custom) as bag:
         for k in range(steps):
@@ -102,8 +102,8 @@ def test_a_topic_whose_layout_changes_is_read_message_by_message(tmp_path, monke
 
 
 def test_steps_whose_reference_was_lost_are_left_out_the_same_both_ways(tmp_path, monkeypatch):
-    """The references end 1,000 steps before the other messages (a trajectory node killed mid flight): the
-    steps before read as usual, the others are left out and the reading says so, by blocks as by messages."""
+    """The references end 1,000 steps before the other messages (a recorder lost a killed controller's last
+    references, tests/test_ros_nodes.py): the steps before read as usual, the others are left out and the reading says so, by blocks as by messages."""
     bag = write_synthetic_bag(tmp_path / 'bag', 3000, references=2000)
     blocks = read_flight(bag)
     assert blocks.steps == 2000 and blocks.time[-1] == pytest.approx(1.999)

@@ -208,7 +208,7 @@ def _read_steps(bag: Path, namespace: str | None, params: VehicleParams, settle_
 def _latest_index(stamps: np.ndarray, wanted: np.ndarray) -> np.ndarray:
     """Per wanted stamp, the index of the last entry of ``stamps`` with it (a later message of a stamp
     replaces an earlier one), or -1."""
-    if not len(stamps):                 # e.g. the references of a killed trajectory node ended before these steps
+    if not len(stamps):                 # e.g. a killed controller's last references, which the recorder never got
         return np.full(len(wanted), -1)
     order = np.argsort(stamps, kind='stable')
     ordered = stamps[order]
