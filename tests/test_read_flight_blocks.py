@@ -103,7 +103,8 @@ def test_a_topic_whose_layout_changes_is_read_message_by_message(tmp_path, monke
 
 def test_steps_whose_reference_was_lost_are_left_out_the_same_both_ways(tmp_path, monkeypatch):
     """The references end 1,000 steps before the other messages (a recorder lost a killed controller's last
-    references, tests/test_ros_nodes.py): the steps before read as usual, the others are left out and the reading says so, by blocks as by messages."""
+    references, tests/test_ros_nodes.py): the steps before read as usual, the others are left out and the
+    reading says so, by blocks as by messages."""
     bag = write_synthetic_bag(tmp_path / 'bag', 3000, references=2000)
     blocks = read_flight(bag)
     assert blocks.steps == 2000 and blocks.time[-1] == pytest.approx(1.999)
