@@ -2,6 +2,7 @@
 import dataclasses
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -233,3 +234,31 @@ def test_range_errors_read_as_intervals(value, low, high, low_inclusive, message
     with pytest.raises(ParameterError) as error:
         check_number('x', value, low, high, low_inclusive=low_inclusive)
     assert str(error.value) == message
+
+
+def test_vehicle_file_takes_yaml_1_2_floats(tmp_path):
+    """Issue 35: `Kp: 3e-5` and `m: 1.0e30` are numbers (YAML 1.1 read them as strings: 'expected a number')."""
+    text = DEFAULT_VEHICLE_FILE.read_text()
+    path = tmp_path / 'vehicle.yaml'
+    path.write_text(re.sub(r'(?m)^  Kp: \S+', '  Kp: 3e-5', text))
+    assert yaml.safe_load(path.read_text())['vehicle']['Kp'] == '3e-5'     # a string by YAML 1.1
+    assert load_vehicle_file(path)[0].Kp == 3e-5
+    path.write_text(re.sub(r'(?m)^  m: \S+', '  m: 1.0e30', text))
+    with pytest.raises(ParameterError, match=r'vehicle\.F_max: .* cannot hover the vehicle of mass m = 1e\+30 kg'):
+        load_vehicle_file(path)
+
+
+@pytest.mark.parametrize('written, value', [
+    ('3e-5', 3e-5), ('1e30', 1e30), ('1.0e30', 1e30), ('.5', 0.5), ('-1E+3', -1000.0), ('1.', 1.0),
+    ('1_000.5', 1000.5), ('-.inf', -math.inf), ('12', 12), ('0x1f', 31), ('+7', 7)])
+def test_yaml_loader_reads_yaml_1_2_numbers(written, value):
+    from quad_msgs_bridge.yaml_files import load_yaml
+    read = load_yaml(f'v: {written}')['v']
+    assert read == value and type(read) is type(value)
+
+
+@pytest.mark.parametrize('written', ['1e', '.', 'e5', '1.2.3', 'nan', 'inf', '2001-12-14', 'yes'])
+def test_yaml_loader_leaves_other_scalars_alone(written):
+    from quad_msgs_bridge.yaml_files import load_yaml
+    assert load_yaml(f'v: {written}')['v'] == yaml.safe_load(f'v: {written}')['v']
+    assert yaml.safe_load('v: 3e-5')['v'] == '3e-5'     # PyYAML's own loader is left as it was

@@ -25,6 +25,7 @@ import yaml
 
 from quad_msgs_bridge.rotor_layout import (FRAMES, STANDARD_DIRECTIONS, frame_positions, layout_problem, rotor_mixer,
                                            rotor_names)
+from quad_msgs_bridge.yaml_files import load_yaml
 
 DEFAULT_VEHICLE_FILE = Path(__file__).resolve().parent / 'config' / 'vehicle.yaml'
 #: the shipped vehicles of real quadrotors, by name (docs/VEHICLES.md); 'paper' is DEFAULT_VEHICLE_FILE
@@ -402,7 +403,7 @@ def load_vehicle_file(path: str | Path | None = None) -> tuple[VehicleParams, Di
     default: the packaged ``config/vehicle.yaml``, the paper's)."""
     path = locate_vehicle(path)
     try:
-        document = yaml.safe_load(path.read_text())
+        document = load_yaml(path.read_text())
     except OSError as error:
         raise ParameterError(f'vehicle file {path}: {error.strerror} (shipped vehicles: '
                              f'{", ".join(shipped_vehicles())})') from error
