@@ -10,3 +10,16 @@ PACKAGE_DIRS = [ROOT / 'ros2_ws' / 'src' / name for name in ('quad_msgs_bridge',
 for _package_dir in PACKAGE_DIRS:
     if _package_dir.is_dir() and str(_package_dir) not in sys.path:
         sys.path.append(str(_package_dir))
+
+
+def _version() -> str:
+    """The stack's version: the installed distribution's, or a clone's pyproject.toml (one source either way)."""
+    from importlib import metadata
+    try:
+        return metadata.version('nnit2fsmc-flight-stack')
+    except metadata.PackageNotFoundError:
+        import tomllib
+        return tomllib.loads((ROOT / 'pyproject.toml').read_text())['project']['version']
+
+
+__version__ = _version()

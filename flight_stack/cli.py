@@ -55,6 +55,7 @@ DEPENDENCIES = {'numpy': 'numpy', 'numba': 'numba', 'yaml': 'PyYAML', 'rosbags':
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     from nnit2fsmc_controller.factory import CONTROLLERS
     from nnit2fsmc_controller.trajectory import SCENARIOS
+    from flight_stack import __version__
     from quad_msgs_bridge.contract import RECORDED_TOPICS
     from quad_msgs_bridge.output_path import output_path
     from flight_stack.fleet import MAX_VEHICLES
@@ -62,8 +63,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     parser.add_argument('--backend', choices=('auto', 'ros', 'embedded'), default='auto')
-    parser.add_argument('--controller', choices=CONTROLLERS, default='nnit2fsmc')
+    parser.add_argument('--controller', default=None, metavar='KIND',
+                        help='the control law: a built-in kind (' + ', '.join(CONTROLLERS) + '), an installed '
+                             'controller\'s entry point, or module:Class (docs/CONTROLLERS.md; run_stack.py list '
+                             'controllers). Default: the --gains file\'s controller: key, else nnit2fsmc')
     parser.add_argument('--scenario', choices=tuple(SCENARIOS), default='paper')
     parser.add_argument('--duration', type=float, default=None,
                         help='sim time to fly [s] (default: the scenario\'s length)')
@@ -77,7 +82,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                              'and an existing --bag')
     parser.add_argument('--vehicle', type=Path, default=None,
                         help='vehicle YAML, or a shipped vehicle by name: paper (the default), crazyflie, hummingbird, x500')
-    parser.add_argument('--gains', type=Path, default=None, help='controller gains YAML, or a named set: packaged (the default), untuned, paper-faithful')
+    parser.add_argument('--gains', type=Path, default=None,
+                        help='controller gains YAML, whole or only the gains it changes (merged over the packaged '
+                             'set, or over the set its base: key names), or a named set: packaged (the default), '
+                             'untuned, paper-faithful')
+    parser.add_argument('--set', dest='gain_settings', action='append', default=[], metavar='KEY=VALUE',
+                        help='change one gain, KEY dotted as the gains file nests it (e.g. --set pid.axes.x.kp=30); '
+                             'repeatable; applied over --gains')
     parser.add_argument('--plant', choices=PLANTS, default=DEFAULT_PLANT,
                         help='what the simulator flies: our model of eq. (1), or RotorPy (docs/ROTORPY.md)')
     parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz], a multiple of the control rate')
@@ -123,6 +134,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     live.add_argument('--live-wait', action='store_true',
                       help='start flying once a client has subscribed to a topic (so that it misses nothing)')
     return parser.parse_args(argv)
+
+
+def folder_name(kind: str) -> str:
+    """``kind`` as a folder name: a module:Class kind's ':' and other characters a path should not hold become '_'."""
+    import re
+    return re.sub(r'[^\w.-]', '_', kind)
 
 
 def choose_backend(requested: str, live: bool) -> str:
@@ -432,18 +449,23 @@ def run(argv: list[str]) -> int:
     if argv[:1] == ['export']:
         from flight_stack.export import main as export_main
         return export_main(argv[1:])
+    if argv[:1] == ['list']:
+        from flight_stack.listing import main as list_main
+        return list_main(argv[1:])
     args = parse_args(argv)
     if not args.quiet:
         print('planning the flight', flush=True)
     from flight_stack.fleet import MAX_VEHICLES
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
+    from nnit2fsmc_controller.factory import choose_controller
     from quad_msgs_bridge.vehicle_params import ParameterError, check_number
     try:
+        args.controller = choose_controller(args.controller, args.gains)
         plan = plan_flight(args.controller, args.scenario, duration=args.duration, disturbances=args.disturbances,
                            seed=args.seed, vehicle_file=args.vehicle, gains_file=args.gains,
                            physics_rate=args.physics_rate, settle_time=args.settle_time, max_error=args.max_error,
-                           topics=args.topics, plant=args.plant)
+                           topics=args.topics, plant=args.plant, gain_settings=args.gain_settings)
         check_count('--extra-subscribers', args.extra_subscribers, 0, 100)
         check_count('--vehicles', args.vehicles, 1, MAX_VEHICLES)
         backend = choose_backend(args.backend, args.live)
@@ -454,7 +476,7 @@ def run(argv: list[str]) -> int:
         if backend == 'ros':
             args.speed_factor = check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor,
                                              0.0, low_inclusive=False)
-        out_dir = args.out or Path('out') / f'{args.scenario}-{args.controller}'
+        out_dir = args.out or Path('out') / f'{args.scenario}-{folder_name(args.controller)}'
         bag_shown = None if args.no_bag else args.bag or out_dir / 'bag'
         output = RunOutput(out_dir, bag_shown, args.overwrite)
     except ParameterError as error:

@@ -7,19 +7,19 @@ gains key and its valid range.
 """
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Mapping, Sequence
 
-from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, control_period, load_gains
+from nnit2fsmc_controller.factory import build_controller, control_period, load_gains, with_settings
+from nnit2fsmc_controller.registry import check_controller
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.flight_bag import select_topics
 from quad_msgs_bridge.contract import TopicSpec
 from quad_msgs_bridge.review.metrics import default_settle_time
 from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams, check_number, load_vehicle_file
 from quad_sim.perturbations.vehicle_change import VehicleChange, vehicle_change
-from quad_sim.plants import DEFAULT_PLANT, check_plant
+from quad_sim.plants import DEFAULT_PLANT, check_plant, check_plant_installed
 
 from .embedded import Perturbations
 
@@ -159,16 +159,19 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
                 gains_file: Path | Mapping | None = None, physics_rate: float = 1000.0,
                 settle_time: float | None = None,
                 max_error: float = 1.0, topics: Sequence[str] | None = None, plant: str = DEFAULT_PLANT,
-                **world) -> FlightPlan:
+                gain_settings: Sequence[str] = (), **world) -> FlightPlan:
     """Every setting of a flight, checked; raises ParameterError (see the module doc).
 
     ``duration`` None: the scenario's length; ``disturbances`` None: as in the vehicle file (for a
     VehicleParams ``vehicle_file``: as in the packaged one); ``settle_time`` None:
     :func:`~quad_msgs_bridge.review.metrics.default_settle_time` of the duration; ``topics`` None: every
-    recorded contract topic; ``plant``: what the simulator flies (``--plant``: quad_sim or rotorpy); ``world``:
-    the keyword arguments of :func:`plan_perturbations`.
+    recorded contract topic; ``plant``: what the simulator flies (``--plant``: quad_sim or rotorpy), its packages
+    installed; ``gain_settings``: ``KEY=VALUE`` changes of one gain each (``--set``); ``world``: the keyword
+    arguments of :func:`plan_perturbations`. ``controller`` is any kind the registry names (a built-in one, an
+    installed entry point's, or ``module:Class``: nnit2fsmc_controller.registry); ``gains_file`` a gains file,
+    a named set or a mapping, whole or of only the gains it changes.
     """
-    check_plant(plant, '--plant')
+    check_plant_installed(check_plant(plant, '--plant'), '--plant')
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise ParameterError(f'--seed: {seed!r} is outside the valid range [0, {MAX_SEED}] (an integer)')
     if duration is not None:
@@ -184,17 +187,13 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
         raise ParameterError(f'vehicle: expected a VehicleParams or a vehicle YAML path, got {vehicle_file!r}')
     if disturbances is not None:
         vehicle_disturbances = vehicle_disturbances.switched(disturbances)
-    if controller not in CONTROLLERS:
-        raise ParameterError(f'controller: {controller!r} is not one of {", ".join(CONTROLLERS)}')
-    if isinstance(gains_file, Mapping):
-        gains = copy.deepcopy(dict(gains_file))    # as make_controller takes it: a whole gains tree
-    elif gains_file is None or isinstance(gains_file, (str, Path)):
-        try:
-            gains = load_gains(gains_file)
-        except ParameterError as error:
-            raise ParameterError(f'gains: {error}') from error
-    else:
+    check_controller(controller)
+    if not (gains_file is None or isinstance(gains_file, (str, Path, Mapping))):
         raise ParameterError(f'gains: expected a gains mapping or a gains YAML path, got {gains_file!r}')
+    try:
+        gains = with_settings(load_gains(gains_file, kind=controller), gain_settings)
+    except ParameterError as error:
+        raise ParameterError(f'gains: {error}') from error
     gains.setdefault('nnit2fsmc', {})['seed'] = seed
     source = ('the given mapping' if isinstance(gains_file, Mapping) else gains_file
               or 'the packaged controller.yaml')
@@ -205,6 +204,9 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
     control_rate = 1.0 / control_period(gains)
     trajectory = make_scenario(scenario, duration)
     duration = trajectory.duration if duration is None else duration
+    if duration < 2.0 / control_rate:
+        raise ParameterError(f'--duration: {duration:g} s is shorter than two control steps ({2.0 / control_rate:g} s '
+                             f'at common.control_rate {control_rate:g} Hz), so nothing would be flown or measured')
     physics_rate = check_physics_rate(physics_rate, control_rate)
     perturbations = plan_perturbations(scenario, controller, seed, duration, control_rate, physics_rate, params,
                                        **world)

@@ -139,6 +139,16 @@ def check_inputs(t: float, state: Sequence, reference: ReferenceSample, batch: i
     return xp
 
 
+def finite_output(out: ControlOutput, batch: int | None) -> ControlOutput:
+    """``out``, or ValueError if a single vehicle's rotor thrusts are not finite: a finite state far beyond
+    any flight (|values| near 1e300) overflows the laws. A batch's diverging vehicle is the closed loop's to
+    fail and freeze (flight_stack.closed_loop), so a batch is passed as it is."""
+    if batch is None and not all(map(math.isfinite, out.forces)):
+        raise ValueError(f'the rotor thrusts came out non-finite {tuple(out.forces)}: the state or reference is '
+                         'beyond what the laws can compute (overflow)')
+    return out
+
+
 def _not_a_vector(reference: ReferenceSample) -> str:
     """What names the first vector field of ``reference`` that is not 3 values."""
     for name in ('position', 'velocity', 'acceleration', 'jerk', 'snap'):
@@ -445,11 +455,11 @@ class CascadedController:
 
         Raises ValueError on a state of the wrong shape (see :func:`check_inputs`), a time or a reference
         that is not one, or a non-finite state or reference (of any vehicle of a batch), before any law (or
-        its learning) runs.
+        its learning) runs; and on non-finite thrusts of a single vehicle (:func:`finite_output`).
         """
         xp = check_inputs(t, state, reference, self.batch)
         if self._kernel is not None:
-            return self._kernel_update(state, reference)
+            return finite_output(self._kernel_update(state, reference), self.batch)
         p = self.params
         x, y, z, vx, vy, vz, phi, theta, psi, dphi, dtheta, dpsi = state
         laws = self.laws
@@ -493,11 +503,11 @@ class CascadedController:
 
         forces = allocate(self.allocation, out_z.value, out_phi.value, out_theta.value, out_psi.value,
                           p.mixer, p.F_min, p.F_max)
-        return ControlOutput(
+        return finite_output(ControlOutput(
             forces=forces,
             controls=controls_from_forces(*forces, p.mixer),
             axes={'x': out_x, 'y': out_y, 'z': out_z, 'phi': out_phi, 'theta': out_theta, 'psi': out_psi},
-            attitude_reference=(phi_d, theta_d, psi_d))
+            attitude_reference=(phi_d, theta_d, psi_d)), self.batch)
 
     def _kernel_update(self, state: Sequence, reference: ReferenceSample) -> ControlOutput:
         """:meth:`update` of a single vehicle by :func:`cascade_step` (inputs checked)."""

@@ -1,10 +1,12 @@
 """Building a controller by name from the gains file (``config/controller.yaml``)."""
 from __future__ import annotations
 
+import copy
 import difflib
 import functools
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import yaml
 
@@ -14,14 +16,16 @@ from quad_msgs_bridge.reference import SetpointPath, hold
 from quad_msgs_bridge.state import odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
 
-from .axis_laws import IntegralSlidingModeLaw, NNIT2FSMCLaw, PIDLaw, SlidingModeLaw
+load_yaml = yaml.safe_load   # placeholder until the shared loader lands
+
+from .axis_laws import NNIT2FSMCLaw
 from .controller import ATTITUDE_RATES, AXES, CascadedController
 from .estimation import MeasurementStage
 from .gain_units import check_hover_authority, in_vehicle_units
-from .indi import INDIController
 from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector, SaturationCorrector
-from .l1_adaptive import L1SE3Controller
+from .kinds import ABLATIONS as _ABLATIONS, BUILT_IN
 from .neural_network import MODIFICATIONS, EquivalentControlNetwork
+from .registry import ControllerKind, controller_kind, kind_for_section, section_gains
 from .se3 import SE3Controller
 
 DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controller.yaml'
@@ -29,17 +33,12 @@ DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controll
 #: tuning) and 'paper-faithful' (those with PAPER_FAITHFUL); 'packaged' is DEFAULT_CONTROLLER_FILE (every
 #: kind's tuned point, as the scoreboard flew them)
 SHIPPED_GAINS = Path(__file__).resolve().parent / 'config' / 'gains'
-#: the NNIT2FSMC's ablations (docs/ADAPTIVE.md): the IT2 term replaced by -K sat(S / Phi), type-1 fuzzy
-#: (lower membership functions = upper ones), learning off, and a network whose only input is the bias
-ABLATIONS = ('nnit2fsmc-sat', 'nnit2fsmc-type1', 'nnit2fsmc-nolearn', 'nnit2fsmc-bias')
-#: the adaptive baselines (docs/ADAPTIVE_BASELINES.md): L1 adaptive augmentation of se3, and INDI
-ADAPTIVE_BASELINES = ('l1-se3', 'indi')
-CONTROLLERS = ('nnit2fsmc', 'smc-sign', 'smc-sat', 'smc-integral', 'pid', 'se3') + ADAPTIVE_BASELINES + ABLATIONS
-#: the keys of the l1_se3 and indi sections (beside their axes), read as numbers
-L1_KEYS = ('predictor_pole_translation', 'predictor_pole_rotation', 'cutoff_translation_hz', 'cutoff_rotation_hz',
-           'estimate_limit_translation', 'estimate_limit_rotation')
-INDI_KEYS = ('rate_filter_hz', 'acceleration_filter_hz', 'motor_time_constant', 'effectiveness_rate',
-             'effectiveness_threshold', 'effectiveness_min', 'effectiveness_max')
+#: the NNIT2FSMC's ablations (docs/ADAPTIVE.md; :data:`.kinds.ABLATIONS`)
+ABLATIONS = tuple(_ABLATIONS)
+#: the built-in kinds' names (:mod:`.kinds`); a user's kind is named by an entry point or module:Class (:mod:`.registry`)
+CONTROLLERS = tuple(kind.name for kind in BUILT_IN)
+#: the largest network a subsystem may have (hidden neurons): a 500 Hz update stays cheap and planning instant
+MAX_HIDDEN_UNITS = 1000
 NN_INPUTS = 3   # (ref_vel, ref_acc, 1), see NNIT2FSMCLaw
 FEEDFORWARD_AXES = ('x', 'y')   #: where the virtual control is the subsystem's acceleration (nnit2fsmc.acceleration_feedforward)
 #: the paper-faithful value of every key that changes the controller away from the paper (docs/ADAPTIVE.md),
@@ -86,31 +85,150 @@ def locate_gains(path: str | Path | None) -> Path:
     return shipped_gains().get(path.name[:-len('.yaml')] if path.suffix == '.yaml' else path.name, path)
 
 
-def load_gains(path: str | Path | None = None) -> dict:
-    """The gains file as a dict (default: the packaged one), or a named gains set (:func:`locate_gains`);
-    errors name the file."""
+@dataclass(frozen=True)
+class GainsFile:
+    """What a gains file says: its gains (all of them, or only those it changes), the kind it was made for
+    (``controller:``, as ``tune`` writes it) and the gains it changes (``base:``, a named set or a file)."""
+
+    path: Path
+    gains: dict
+    controller: str | None = None
+    base: str | None = None
+
+
+def read_gains_file(path: str | Path) -> GainsFile:
+    """The gains file at ``path`` (or the named set of that name: :func:`locate_gains`), a plain gains mapping
+    or a ROS 2 parameter file; errors name the file."""
+    if not isinstance(path, (str, Path)):
+        raise ParameterError(f'gains: expected a gains YAML path or a named set ({", ".join(shipped_gains())}), '
+                             f'got {path!r}')
     path = locate_gains(path)
     try:
-        gains = yaml.safe_load(path.read_text())
+        document = load_yaml(path.read_text())
     except OSError as error:
         raise ParameterError(f'controller file {path}: {error.strerror} (named gains: '
                              f'{", ".join(shipped_gains())})') from error
     except yaml.YAMLError as error:
         raise ParameterError(f'controller file {path}: not valid YAML ({error})') from error
-    if not isinstance(gains, dict):
+    if not isinstance(document, dict):
         raise ParameterError(f'controller file {path}: expected a mapping')
-    gains = ros_parameters(gains)
+    declared = {key: document.pop(key) for key in ('controller', 'base') if key in document}
+    node = ros_node_parameters(document)
+    declared.update({key: node[key] for key in ('controller', 'base') if key in node})
+    for key, value in declared.items():
+        if not isinstance(value, str) or not value:
+            raise ParameterError(f'controller file {path}: {key}: expected a name, got {value!r}')
+    return GainsFile(path, ros_parameters(document), declared.get('controller'), declared.get('base'))
+
+
+def load_gains(path: str | Path | Mapping[str, Any] | None = None, *, kind: str | None = None) -> dict:
+    """The whole gains tree of ``path``: a gains file or a named set (:func:`locate_gains`), or a mapping,
+    merged over the gains it changes (its ``base:``, else the packaged set), so a file may hold one key
+    only; None: the packaged set. With ``kind``, a user's kind's section holds its defaults too. Errors
+    name the file and the gain (an unknown one with the closest valid name)."""
+    if path is None:
+        tree = _read_tree(DEFAULT_CONTROLLER_FILE)
+    elif isinstance(path, Mapping):
+        tree = merged(_read_tree(DEFAULT_CONTROLLER_FILE), path)
+    else:
+        read = read_gains_file(path)
+        base = DEFAULT_CONTROLLER_FILE if read.base is None else _base_path(read)
+        tree = merged(load_gains(base) if base != read.path else {}, read.gains, f'controller file {read.path}: ')
+    if kind is not None:
+        described = controller_kind(kind)
+        if described.schema is not None:
+            tree[described.gains_section] = section_gains(described, tree)
     try:
-        check_gain_names(gains)
+        check_gain_names(tree)
     except ParameterError as error:
-        raise ParameterError(f'controller file {path}: {error}') from error
-    return gains
+        where = '' if path is None or isinstance(path, Mapping) else f'controller file {locate_gains(path)}: '
+        raise ParameterError(f'{where}{error}') from error
+    return tree
+
+
+def _read_tree(path: Path) -> dict:
+    return read_gains_file(path).gains
+
+
+def _base_path(read: GainsFile) -> Path:
+    """The file that ``read``'s ``base:`` names: a named set, or a path relative to ``read``'s folder."""
+    named = shipped_gains()
+    if read.base in named:
+        return named[read.base]
+    base = Path(read.base)
+    base = base if base.is_absolute() else read.path.parent / base
+    if not base.exists():
+        raise ParameterError(f'controller file {read.path}: base: {read.base!r} is neither a named set '
+                             f'({", ".join(named)}) nor a file')
+    return base
+
+
+def merged(base: Mapping[str, Any], changes: Mapping[str, Any], where: str = '', prefix: str = '') -> dict:
+    """A copy of the gains tree ``base`` with every gain of ``changes`` (a tree, or part of one) replacing its own."""
+    if not isinstance(changes, Mapping):
+        raise ParameterError(f'{where}gains: expected a mapping, got {type(changes).__name__}')
+    tree = copy.deepcopy(dict(base))
+    for key, value in changes.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            if key in tree and not isinstance(tree[key], Mapping):
+                raise ParameterError(f'{where}{name}: is a gain, not a section of gains (got {dict(value)!r})')
+            tree[key] = merged(tree.get(key, {}), value, where, name + '.')
+        else:
+            if isinstance(tree.get(key), Mapping):
+                raise ParameterError(f'{where}{name}: is a section of gains ({", ".join(tree[key])}), not one value')
+            tree[key] = copy.deepcopy(value)
+    return tree
+
+
+def with_settings(gains: Mapping[str, Any], settings: Sequence[str]) -> dict:
+    """``gains`` with each ``KEY=VALUE`` of ``settings`` set (``--set pid.axes.x.kp=30``: KEY dotted as the gains
+    file nests it, VALUE read as YAML); an unknown KEY is refused with the closest valid name."""
+    changes: dict = {}
+    for setting in settings:
+        name, equals, text = setting.partition('=')
+        name = name.strip()
+        if not equals or not name:
+            raise ParameterError(f'--set {setting!r}: expected KEY=VALUE (e.g. --set pid.axes.x.kp=30)')
+        try:
+            value = load_yaml(text) if text.strip() else None
+        except yaml.YAMLError:
+            value = text
+        if value is None or isinstance(value, (dict, list)):
+            raise ParameterError(f'--set {setting!r}: VALUE must be one number, word or true/false')
+        changes[name] = value
+    tree = merged(gains, unflatten_gains(changes), '--set ')
+    try:
+        check_gain_names(tree)
+    except ParameterError as error:
+        raise ParameterError(f'--set {error}') from error
+    return tree
+
+
+def declared_controller(path: str | Path | Mapping[str, Any] | None) -> str | None:
+    """The kind a gains file says it was made for (its ``controller:``), or None (also for a mapping or None)."""
+    if path is None or isinstance(path, Mapping):
+        return None
+    return read_gains_file(path).controller
+
+
+def choose_controller(requested: str | None, gains: str | Path | Mapping[str, Any] | None,
+                      default: str = 'nnit2fsmc') -> str:
+    """The kind to fly: ``requested`` (``--controller``), which must agree with the gains file's ``controller:``;
+    the file's alone selects it; neither: ``default``."""
+    declared = declared_controller(gains)
+    if requested is not None and declared is not None and requested != declared:
+        raise ParameterError(f'--controller {requested}: the gains file {locate_gains(gains)} was made for '
+                             f'controller {declared} (its controller: key); fly --controller {declared}, or drop '
+                             'its controller: line')
+    return requested or declared or default
 
 
 @functools.lru_cache(maxsize=1)
 def gain_names() -> frozenset[str]:
-    """Every gain a gains file may hold, flattened ('common.lambda.x', ...): those of the packaged file."""
-    document = yaml.safe_load(DEFAULT_CONTROLLER_FILE.read_text())
+    """Every gain of the built-in kinds a gains file may hold, flattened ('common.lambda.x', ...): those of the
+    packaged file."""
+    document = load_yaml(DEFAULT_CONTROLLER_FILE.read_text())
     return frozenset(flatten_gains(ros_parameters(document)))
 
 
@@ -122,16 +240,30 @@ def _did_you_mean(name: str, candidates) -> str:
 
 def check_gain_names(gains: Mapping[str, Any]) -> None:
     """ParameterError naming the first gain of ``gains`` (a tree, as in the gains file) that is not a gain,
-    with the closest valid name: a misspelt gain would otherwise fly silently with its default."""
+    with the closest valid name: a misspelt gain would otherwise fly silently with its default. A section
+    no built-in kind reads is a user's kind's (:func:`.registry.kind_for_section`), checked against its schema."""
     if not isinstance(gains, Mapping):
         raise ParameterError(f'gains: expected a mapping, got {type(gains).__name__}')
     valid = gain_names()
-    for name in flatten_gains(gains):
-        if name not in valid:
-            raise ParameterError(f'{name}: unknown gain{_did_you_mean(name, valid)}')
+    sections = {name.split('.')[0] for name in valid}
+    for section, part in gains.items():
+        if section not in sections:
+            user = kind_for_section(str(section))
+            if user is not None:
+                section_gains(user, gains)
+                continue
+        for name in flatten_gains({section: part}):
+            if name not in valid:
+                raise ParameterError(f'{name}: unknown gain{_did_you_mean(name, valid)}')
 
 
-NODE_PARAMETERS = ('controller', 'vehicle_file', 'gains_file', 'goal_speed', 'odom_timeout')
+NODE_PARAMETERS = ('controller', 'base', 'vehicle_file', 'gains_file', 'goal_speed', 'odom_timeout')
+
+
+def ros_node_parameters(document: dict) -> dict:
+    """The node-level parameters of a ROS 2 parameter file (``controller``, ...), {} for a plain gains mapping."""
+    return {key: value for section in document.values() if isinstance(section, dict) and 'ros__parameters' in section
+            for key, value in section['ros__parameters'].items() if key in NODE_PARAMETERS}
 
 
 def ros_parameters(document: dict) -> dict:
@@ -208,62 +340,16 @@ def learning_rate(gains: Mapping[str, Any], axis: str, dt: float, params: Vehicl
 
 
 def build_controller(kind: str, params: VehicleParams, gains: Mapping[str, Any] | None = None,
-                     batch: int | None = None) -> CascadedController | SE3Controller:
-    """A fresh controller of ``kind`` (one of CONTROLLERS) for the nominal vehicle ``params``.
+                     batch: int | None = None):
+    """A fresh controller of ``kind`` (a built-in kind, an installed entry point's or ``module:Class``:
+    :mod:`.registry`) for the nominal vehicle ``params``, from the gains tree ``gains`` (None: the packaged one).
 
     ``batch``: None for one vehicle (states of floats), or the number B of vehicles it steps at once
     (states of numpy arrays of B values; every vehicle has its own network weights).
     """
     gains = load_gains() if gains is None else gains
     check_gain_names(gains)
-    dt = control_period(gains)
-    lam = {axis: _positive(gains, f'common.lambda.{axis}') for axis in AXES}
-    structure = dict(max_tilt=_positive(gains, 'common.max_tilt'),
-                     low_altitude_max_tilt=_positive(gains, 'common.low_altitude_max_tilt'),
-                     low_altitude_height=_non_negative(gains, 'common.low_altitude_height'),
-                     angle_filter_tau=_positive(gains, 'common.angle_filter_tau'),
-                     allocation=gains.get('common', {}).get('allocation', 'priority'),
-                     takeoff_height=_non_negative(gains, 'common.takeoff_height'), batch=batch)
-    if kind in ('se3', 'l1-se3'):
-        section = SE3Controller.GAINS_SECTION if kind == 'se3' else L1SE3Controller.GAINS_SECTION
-        se3_gains = {axis: tuple(_non_negative(gains, f'{section}.axes.{axis}.{name}')
-                                 for name in ('k_error', 'k_rate', 'k_integral', 'integral_limit')) for axis in AXES}
-        if kind == 'se3':
-            return SE3Controller(kind, params, se3_gains, lam, dt, **structure)
-        return L1SE3Controller(kind, params, se3_gains, lam, dt, {key: _get(gains, f'l1_se3.{key}') for key in L1_KEYS},
-                               **structure)
-    if kind == 'indi':
-        indi_gains = {axis: tuple(_non_negative(gains, f'indi.axes.{axis}.{name}') for name in ('k_error', 'k_rate'))
-                      for axis in AXES}
-        return INDIController(kind, params, indi_gains, lam, dt, {key: _get(gains, f'indi.{key}') for key in INDI_KEYS},
-                              velocity_filter_hz=_non_negative(gains, 'common.velocity_filter_hz'), **structure)
-    if kind == 'nnit2fsmc' or kind in ABLATIONS:
-        laws = {axis: nnit2fsmc_law(kind, gains, axis, lam[axis], dt, batch, params) for axis in AXES}
-    elif kind in ('smc-sign', 'smc-sat'):
-        laws = {axis: SlidingModeLaw(
-            lam[axis], _non_negative(gains, f'smc.switching_gain.{axis}'),
-            _positive(gains, f'smc.boundary_layer.{axis}') if kind == 'smc-sat' else 0.0)
-            for axis in AXES}
-    elif kind == 'smc-integral':
-        laws = {axis: IntegralSlidingModeLaw(
-            lam[axis],
-            mu=_non_negative(gains, f'smc_integral.axes.{axis}.integral_gain'),
-            slope=_positive(gains, f'smc_integral.axes.{axis}.slope'),
-            switching_gain=_non_negative(gains, f'smc_integral.axes.{axis}.switching_gain'),
-            gain_uncertainty=_non_negative(gains, f'smc_integral.axes.{axis}.gain_uncertainty'),
-            integral_limit=_non_negative(gains, f'smc_integral.axes.{axis}.integral_limit'),
-            dt=dt) for axis in AXES}
-    elif kind == 'pid':
-        laws = {axis: PIDLaw(
-            lam[axis],
-            kp=_non_negative(gains, f'pid.axes.{axis}.kp'),
-            ki=_non_negative(gains, f'pid.axes.{axis}.ki'),
-            kd=_non_negative(gains, f'pid.axes.{axis}.kd'),
-            integral_limit=_non_negative(gains, f'pid.axes.{axis}.integral_limit'),
-            dt=dt) for axis in AXES}
-    else:
-        raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
-    return CascadedController(kind, params, laws, dt, **structure, attitude_rates=_get(gains, 'common.attitude_rates'))
+    return controller_kind(kind).build(kind, params, gains, batch)
 
 
 def build_measurement_stage(gains: Mapping[str, Any] | None = None) -> MeasurementStage:
@@ -319,7 +405,7 @@ def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt
     modification = _get(gains, 'nnit2fsmc.modification')
     network = EquivalentControlNetwork(
         n_inputs=1 if kind == 'nnit2fsmc-bias' else NN_INPUTS,
-        n_hidden=int(_positive(gains, 'nnit2fsmc.hidden_units')),
+        n_hidden=int(check_number('nnit2fsmc.hidden_units', _get(gains, 'nnit2fsmc.hidden_units'), 1, MAX_HIDDEN_UNITS)),
         output_gain=_authority(gains, f'{key}.nn_gain', params, axis),
         learning_rate=0.0 if kind == 'nnit2fsmc-nolearn' else learning_rate(gains, axis, dt, params),
         weight_limit=_positive(gains, 'nnit2fsmc.weight_limit'),
@@ -332,20 +418,18 @@ def nnit2fsmc_law(kind: str, gains: Mapping[str, Any], axis: str, lam: float, dt
                         feedforward=axis in FEEDFORWARD_AXES and _flag(gains, 'nnit2fsmc.acceleration_feedforward'))
 
 
-#: the gains section each kind's laws read (:func:`build_controller`); every kind also reads ``common``
-GAINS_SECTIONS = {'nnit2fsmc': 'nnit2fsmc', **{kind: 'nnit2fsmc' for kind in ABLATIONS}, 'smc-sign': 'smc',
-                  'smc-sat': 'smc', 'smc-integral': 'smc_integral', 'pid': 'pid', 'se3': SE3Controller.GAINS_SECTION,
-                  'l1-se3': L1SE3Controller.GAINS_SECTION, 'indi': 'indi'}
-
-
 def gains_flown_by(kind: str, gains: Mapping[str, Any]) -> dict[str, Any]:
     """The gains ``kind`` flies, flattened ({'common.control_rate': 500.0, 'pid.axes.x.kp': ...}): the
-    ``common`` section and the kind's own (GAINS_SECTIONS), so two gains files that differ elsewhere fly
-    it the same."""
-    if kind not in GAINS_SECTIONS:
-        raise ParameterError(f'controller: {kind!r} is not one of {", ".join(CONTROLLERS)}')
-    read = ('common', GAINS_SECTIONS[kind])
-    return {name: value for name, value in flatten_gains(gains).items() if name.split('.')[0] in read}
+    ``common`` section and the kind's own (its ``gains_section``; a user's kind's over its defaults), so two
+    gains files that differ elsewhere fly it the same."""
+    described = controller_kind(kind)
+    flat = flatten_gains(gains)
+    flown = {name: value for name, value in flat.items() if name.split('.')[0] == 'common'}
+    if described.schema is None:
+        flown.update({name: value for name, value in flat.items() if name.split('.')[0] == described.gains_section})
+    else:
+        flown.update(flatten_gains({described.gains_section: section_gains(described, gains)}))
+    return flown
 
 
 def flatten_gains(gains: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:

@@ -55,7 +55,7 @@ from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
 
 from .axis_laws import AxisOutput
-from .controller import AXES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_inputs
+from .controller import AXES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_inputs, finite_output
 
 #: minimum vertical part of the desired force, in units of m g (keeps b3_d pointing up)
 MIN_LIFT = 0.1
@@ -184,7 +184,8 @@ class SE3Controller:
         """Rotor thrusts [N] for the 12-state ``state`` and the reference at the same instant t [s].
 
         Raises ValueError on a state of the wrong shape, a time or a reference that is not one, or a
-        non-finite state or reference, before any state changes (:func:`.controller.check_inputs`).
+        non-finite state or reference, before any state changes (:func:`.controller.check_inputs`); and on
+        non-finite thrusts of a single vehicle (:func:`.controller.finite_output`).
         """
         xp = check_inputs(t, state, reference, self.batch)
         p = self.params
@@ -252,4 +253,5 @@ class SE3Controller:
         axes['z'] = AxisOutput(thrust, ev[2] + lam['z'] * ex[2], thrust - feedback[2], feedback[2])
         axes.update({a: AxisOutput(u, e_w[k] + lam[a] * e_r[k], u - fb / s, fb / s) for k, (a, u, fb, s)
                      in enumerate(zip(attitude_axes, (u2, u3, u4), moment_feedback, scale))})
-        return ControlOutput(forces=forces, controls=controls, axes=axes, attitude_reference=desired)
+        return finite_output(ControlOutput(forces=forces, controls=controls, axes=axes, attitude_reference=desired),
+                             self.batch)

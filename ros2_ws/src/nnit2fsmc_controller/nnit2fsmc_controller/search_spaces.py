@@ -8,7 +8,8 @@ Every kind gets the same number of dimensions (six), chosen in the position loop
 wind and mass perturbations load (and, for the adaptive kinds, their translational adaptation); the
 attitude loops keep the packaged gains. Each range contains the packaged
 value (so the packaged gains can be enqueued as the first trial) and spans it by about a decade on
-a log scale. Adding a kind is one entry of :data:`SEARCH_SPACES`.
+a log scale. Adding a built-in kind is one entry of :data:`SEARCH_SPACES`; a user's kind's space comes from its gains
+schema (:mod:`.registry`).
 """
 from __future__ import annotations
 
@@ -93,17 +94,18 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
 
 
 def search_space(kind: str) -> tuple[Dimension, ...]:
-    """The search space of ``kind``; ParameterError naming the kinds that have one. An ablation of the
-    NNIT2FSMC (factory.ABLATIONS) reads the same ``nnit2fsmc`` section and searches its space: tuned alone
-    (``run_stack.py tune --controller nnit2fsmc-bias``), it gets the NNIT2FSMC's budget, and its point goes
-    to its own gains file (it is not packaged: it would overwrite the NNIT2FSMC's)."""
-    from .factory import ABLATIONS
-    if kind in ABLATIONS:
-        return SEARCH_SPACES['nnit2fsmc']
-    if kind not in SEARCH_SPACES:
-        raise ParameterError(f'--controller: {kind!r} has no search space (tunable: {", ".join(SEARCH_SPACES)} '
-                             'and the NNIT2FSMC\'s ablations; nnit2fsmc_controller/search_spaces.py declares them)')
-    return SEARCH_SPACES[kind]
+    """The search space of ``kind`` (its :class:`.registry.ControllerKind`'s; a user's kind's from its gains
+    schema); ParameterError if it has none. An ablation of the NNIT2FSMC reads the same ``nnit2fsmc`` section
+    and searches its space: tuned alone (``run_stack.py tune --controller nnit2fsmc-bias``), it gets the
+    NNIT2FSMC's budget, and its point goes to its own gains file (it is not packaged: it would overwrite the
+    NNIT2FSMC's)."""
+    from .registry import controller_kind
+    space = controller_kind(kind).search_space
+    if not space:
+        raise ParameterError(f'--controller: {kind!r} has no search space (a built-in kind declares it in '
+                             'nnit2fsmc_controller/search_spaces.py; a user\'s kind gives its gains a finite range, '
+                             'docs/CONTROLLERS.md)')
+    return space
 
 
 def _node(tree: Mapping[str, Any], dotted: str) -> tuple[dict, str]:

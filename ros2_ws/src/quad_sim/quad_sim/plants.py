@@ -10,7 +10,13 @@ from .model import QuadrotorModel
 #: the plant names of --plant, the campaign key plant and the node parameter: our model; RotorPy with its
 #: aerodynamics and motor model; RotorPy's rigid body and rotors alone (aero off, instant motors), to compare with
 #: ours; RotorPy's BatchedMultirotor (torch) with its aerodynamics and motor model, a whole batch per step (campaigns)
-PLANTS = ('quad_sim', 'rotorpy', 'rotorpy-bare', 'rotorpy-batched')
+PLANT_DESCRIPTIONS = {
+    'quad_sim': 'our model of the paper\'s eq. (1), RK4, with section IV disturbances (the default)',
+    'rotorpy': 'RotorPy\'s Multirotor with its aerodynamics and motor model (docs/ROTORPY.md)',
+    'rotorpy-bare': 'RotorPy\'s rigid body and rotors alone (aero off, instant motors), to compare with ours',
+    'rotorpy-batched': 'RotorPy\'s BatchedMultirotor (torch): a campaign batch per step',
+}
+PLANTS = tuple(PLANT_DESCRIPTIONS)
 DEFAULT_PLANT = 'quad_sim'
 
 
@@ -18,6 +24,23 @@ def check_plant(name: str, argument: str = 'plant') -> str:
     """``name`` if it is one of PLANTS, else ParameterError naming ``argument`` and the valid names."""
     if name not in PLANTS:
         raise ParameterError(f'{argument}: {name!r} is not a plant; valid: {", ".join(PLANTS)}')
+    return name
+
+
+#: the Python modules each plant needs beyond the stack's own, and where they come from
+PLANT_MODULES = {'rotorpy': ('rotorpy',), 'rotorpy-bare': ('rotorpy',), 'rotorpy-batched': ('rotorpy', 'torch')}
+PLANT_REQUIREMENTS = {'rotorpy': 'pip install .[rotorpy]', 'rotorpy-bare': 'pip install .[rotorpy]',
+                      'rotorpy-batched': 'pip install -r requirements-rotorpy-batched.txt'}
+
+
+def check_plant_installed(name: str, argument: str = 'plant') -> str:
+    """``name`` if the modules its plant needs import, else ParameterError naming the missing one and how to install
+    it: checked before anything flies or is written."""
+    import importlib.util
+    for module in PLANT_MODULES.get(name, ()):
+        if importlib.util.find_spec(module) is None:
+            raise ParameterError(f'{argument} {name}: needs the Python package {module}, which is not installed for '
+                                 f'this interpreter ({PLANT_REQUIREMENTS[name]}; docs/ROTORPY.md)')
     return name
 
 
