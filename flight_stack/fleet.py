@@ -64,7 +64,8 @@ def format_fleet_summary(fleet: dict) -> str:
     summaries = fleet['vehicles']
     first = next(iter(summaries.values()))
     width = max(7, *(len(name) for name in summaries))
-    lines = [f'fleet: {first["controller"]} on "{first["scenario"]}", {len(summaries)} vehicles on one clock '
+    lines = [f'fleet: {first["controller"]} on "{first["scenario"]}", {len(summaries)} vehicles '
+             f'({first["vehicle"]}) on one clock '
              f'({first["backend"]} backend), {first["duration_s"]:.1f} s sim in {first["wall_time_s"]:.1f} s wall',
              f'  after settling ({first["settle_time_s"]:.1f} s):',
              f'  {"vehicle":{width}s}  offset [m]         pos RMSE [cm]  max err [cm]  yaw RMSE [rad]  '

@@ -7,18 +7,19 @@ from pathlib import Path
 
 from quad_msgs_bridge.review.metrics import FlightRecord, flight_metrics, has_fuzzy_term
 from quad_msgs_bridge.review.report import describe_share
-from quad_msgs_bridge.review.verdict import failures as flight_failures
+from quad_msgs_bridge.review.summary import flight_summary, vehicle_settings
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
-from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
+from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams, vehicle_name
 
 
 def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str, scenario: str, seed: int,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
                   physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None,
                   failure_time_s: float | None = None, planned_duration_s: float | None = None,
-                  plant: str = 'quad_sim') -> dict:
+                  plant: str = 'quad_sim', vehicle_file: str | Path | None = None) -> dict:
     """Metrics of the flight (its metrics dict, e.g. ``Flight.metrics()``, or a FlightRecord to compute them
-    from) plus everything needed to reproduce it.
+    from) plus everything needed to reproduce it (:func:`quad_msgs_bridge.review.summary.flight_summary`,
+    which also builds a bag's summary).
 
     ``flight_ok`` is false when the flight ended early (``failure``: why, see
     flight_stack.closed_loop.FAILURES, at sim time ``failure_time_s`` [s], as the flight result and
@@ -27,7 +28,10 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
     ``failures`` says which, ``failure`` and ``failure_time_s`` why and when it ended early (None if
     it did not), ``ended_early`` the two in words; ``planned_duration_s`` [s] the length flown for
     (None: not given), as the review gives them (quad_msgs_bridge.review.verdict); ``plant``: what
-    the simulator flew (quad_sim.plants.PLANTS).
+    the simulator flew (quad_sim.plants.PLANTS). ``vehicle`` names the vehicle: the shipped one of
+    ``vehicle_file`` (``--vehicle``) or else its path; without it, the shipped vehicle whose parameters
+    ``params`` are, else 'custom' (quad_msgs_bridge.vehicle_params.vehicle_name); ``vehicle_params``
+    holds every parameter.
     """
     metrics = flight if isinstance(flight, dict) else flight_metrics(
         flight, settle_time, params.F_min, params.F_max, fuzzy_term=has_fuzzy_term(controller),
@@ -36,27 +40,13 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
     if failure is not None and failure_time_s is None:
         failure_time_s = float(metrics['duration_s'] if isinstance(flight, dict) else flight.time[-1])
     ended = None if failure is None else f'{failure} at {failure_time_s:.3f} s'
-    failures = flight_failures(metrics, ended, max_error)
-    return {
-        **metrics,
-        'flight_ok': not failures,
-        'failures': failures,
-        'failure': failure,
-        'failure_time_s': failure_time_s,
-        'ended_early': ended,
-        'planned_duration_s': planned_duration_s,
-        'backend': backend,
-        'controller': controller,
-        'scenario': scenario,
-        'seed': seed,
-        'physics_rate_hz': physics_rate,
-        'plant': plant,
-        'wall_time_s': wall_time_s,
-        'real_time_factor': sim_time / wall_time_s if wall_time_s > 0 else None,
-        'vehicle': dataclasses.asdict(params),
-        'disturbances': dataclasses.asdict(disturbances),
-        'gains': gains,
-    }
+    return flight_summary(
+        metrics, ended=ended, max_error=max_error, failure=failure, failure_time_s=failure_time_s,
+        planned_duration_s=planned_duration_s, backend=backend, controller=controller, scenario=scenario,
+        seed=seed, physics_rate_hz=physics_rate, plant=plant, wall_time_s=wall_time_s,
+        real_time_factor=sim_time / wall_time_s if wall_time_s > 0 else None,
+        **vehicle_settings(params, vehicle_name(params, vehicle_file)),
+        disturbances=dataclasses.asdict(disturbances), gains=gains)
 
 
 def write_summary(summary: dict, out_dir: Path) -> Path:
@@ -85,7 +75,8 @@ def format_summary(summary: dict) -> str:
     moment = summary.get('chattering_moment_nm_per_s')
     rtf = summary.get('real_time_factor')
     lines = [
-        f'flight: {summary["controller"]} on "{summary["scenario"]}" ({summary["backend"]} backend), '
+        f'flight: {summary["controller"]} on "{summary["scenario"]}", vehicle {summary["vehicle"]} '
+        f'({summary["backend"]} backend), '
         f'{summary["duration_s"]:.1f} s sim in {summary["wall_time_s"]:.1f} s wall'
         + (f' (real-time factor {rtf:.1f})' if rtf else ''),
         f'  after settling ({summary["settle_time_s"]:.1f} s):',

@@ -35,7 +35,8 @@ def test_the_simulator_and_recorder_run_beside_a_lone_vehicle_or_in_the_fleets_p
 
 
 def vehicle_summary(rmse: float, ok: bool = True) -> dict:
-    return {'controller': 'nnit2fsmc', 'scenario': 'paper', 'backend': 'ros', 'duration_s': 7.0, 'wall_time_s': 20.0,
+    return {'controller': 'nnit2fsmc', 'scenario': 'paper', 'vehicle': 'x500', 'backend': 'ros', 'duration_s': 7.0,
+            'wall_time_s': 20.0,
             'settle_time_s': 5.0, 'rmse_position_m': rmse, 'max_position_error_m': 2 * rmse, 'rmse_yaw_rad': 0.001,
             'saturation_fraction': 0.0, 'flight_ok': ok, 'failures': [] if ok else ['max position error too big'],
             'offset_m': [0.0, 3.0, 0.0], 'ros': {'timing': {'latency_p99_ms': 1.25}}}
@@ -47,6 +48,7 @@ def test_the_fleet_fails_when_one_vehicle_fails_and_the_table_names_it():
     assert fleet['failures'] == ['uav2: max position error too big']
     assert list(fleet['vehicles']) == ['uav1', 'uav2']
     table = format_fleet_summary(fleet).splitlines()
+    assert table[0].startswith('fleet: nnit2fsmc on "paper", 2 vehicles (x500) on one clock')
     uav1 = next(line for line in table if line.strip().startswith('uav1'))
     uav2 = next(line for line in table if line.strip().startswith('uav2'))
     assert '1.000' in uav1 and '2.000' in uav1 and '1.250' in uav1 and uav1.endswith('OK')   # cm, cm, ms

@@ -2,6 +2,7 @@
 the documented rule with exact metrics, and the memory of a flight does not grow with its length."""
 import math
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -48,6 +49,35 @@ def test_the_flown_flight_equals_the_flight_read_back_from_its_bag(flown_with_ba
     assert {key: summary[key] for key in flown.metrics()} == flown.metrics()
     assert read.settle_time == flown.settle_time == summary['settle_time_s']
     assert read.path == out / 'bag' and read.label == 'nnit2fsmc'
+
+
+def test_read_flight_gives_the_summary_fly_gives(flown_with_bag, tmp_path):
+    """Issue 35: read_flight(bag).summary was None, so the README's flight.summary['rmse_position_m'] raised.
+    Beside the run's summary.json every key is fly()'s (rmse_yaw_rad to 1e-12, as above); a bag alone gives
+    every key but those only the run knows (gains, physics rate, plant, wall time, disturbances)."""
+    from quad_msgs_bridge.review.summary import RUN_ONLY_KEYS
+    flown, out = flown_with_bag
+    read = read_flight(out / 'bag').summary
+    assert list(read) == list(flown.summary)
+    assert read['rmse_yaw_rad'] == pytest.approx(flown.summary['rmse_yaw_rad'], rel=1e-12)
+    assert {k: v for k, v in read.items() if k != 'rmse_yaw_rad'} \
+        == {k: v for k, v in flown.summary.items() if k != 'rmse_yaw_rad'}
+    assert read['vehicle'] == 'paper' and read['flight_ok'] and read['controller'] == 'nnit2fsmc'
+    assert 100 * read['rmse_position_m'] > 0      # the README's line
+    alone = tmp_path / 'bag'
+    shutil.copytree(out / 'bag', alone)
+    summary = read_flight(alone).summary
+    run_only = RUN_ONLY_KEYS[0] + RUN_ONLY_KEYS[1]
+    assert list(summary) == [key for key in flown.summary if key not in run_only]
+    assert {k: v for k, v in summary.items() if k != 'rmse_yaw_rad'} \
+        == {k: v for k, v in flown.summary.items() if k not in run_only and k != 'rmse_yaw_rad'}
+
+
+@pytest.mark.parametrize('bag', [42, None, '', ['out/bag']])
+def test_read_flight_names_its_argument_when_it_is_not_a_path(bag):
+    from flight_stack.api import ParameterError
+    with pytest.raises(ParameterError, match=r'^read_flight: bag: expected the path of a bag folder or \.mcap file'):
+        read_flight(bag)
 
 
 def test_a_flight_has_the_time_series_with_their_shapes_and_units(flown_with_bag):

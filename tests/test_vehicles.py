@@ -1,4 +1,5 @@
 """Rotor layouts (plus, x, custom), the shipped vehicles found by name, and the vehicle as a URDF."""
+import json
 import math
 import time
 import xml.etree.ElementTree as ElementTree
@@ -7,17 +8,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from flight_stack.api import CONTROLLERS, fly, load_vehicle
+from flight_stack.api import CONTROLLERS, fly, load_vehicle, read_flight
 from quad_msgs_bridge.conversions import rosbags_kit, rotor_forces_msg
 from quad_msgs_bridge.mixer import forces_from_controls
 from quad_msgs_bridge.urdf import rotor_transforms_msg, vehicle_urdf
 from quad_msgs_bridge.vehicle_params import (ParameterError, VehicleParams, load_vehicle_file, locate_vehicle,
-                                             shipped_vehicles)
+                                             shipped_vehicles, vehicle_name)
 from quad_sim.model import QuadrotorModel
 from ros_support import requires_ros
 
-SHIPPED = ('paper', 'crazyflie', 'hummingbird', 'x500')
+SHIPPED = ('paper', 'crazyflie', 'hummingbird', 'px4-sih-quadx', 'x500')
 PAPER = load_vehicle()
+CRAZYFLIE_MASS = load_vehicle('crazyflie').m
 
 
 # ---------------------------------------------------------------- the shipped vehicles, by name
@@ -49,10 +51,31 @@ def test_a_path_still_works_and_an_unknown_name_lists_the_shipped_ones(tmp_path)
     copy.write_text(shipped_vehicles()['crazyflie'].read_text())
     assert locate_vehicle(copy) == copy and load_vehicle(copy) == load_vehicle('crazyflie')
     assert locate_vehicle(None) == shipped_vehicles()['paper']
-    with pytest.raises(ParameterError, match='nope.*shipped vehicles: paper, crazyflie, hummingbird, x500'):
+    with pytest.raises(ParameterError, match='nope.*shipped vehicles: paper, crazyflie, hummingbird, px4-sih-quadx, x500'):
         load_vehicle('nope')
     with pytest.raises(ParameterError, match='shipped vehicles'):
         load_vehicle(tmp_path / 'x500.yaml')           # a path that is not there is not looked up by name
+
+
+def test_a_vehicle_is_named_by_its_shipped_name_or_its_file(tmp_path):
+    """Issue 35: `--vehicle crazyflie` was named nowhere; vehicle_name gives what summary, console and report say."""
+    for name, path in shipped_vehicles().items():
+        assert vehicle_name(load_vehicle(name)) == vehicle_name(path=name) == vehicle_name(path=path) == name
+    copy = tmp_path / 'mine.yaml'
+    copy.write_text(shipped_vehicles()['crazyflie'].read_text())
+    assert vehicle_name(path=copy) == str(copy)
+    assert vehicle_name(load_vehicle(copy)) == 'crazyflie'     # without its file: the shipped one it equals
+    assert vehicle_name(replace(PAPER, m=0.5)) == 'custom'
+
+
+def test_the_summary_the_console_and_the_report_name_the_vehicle(tmp_path):
+    from flight_stack.summary import format_summary
+    flight = fly('pid', 'hover', duration=0.5, vehicle='crazyflie', out=tmp_path / 'run')
+    assert flight.summary['vehicle'] == 'crazyflie' and flight.summary['vehicle_params']['m'] == CRAZYFLIE_MASS
+    assert json.loads((tmp_path / 'run' / 'summary.json').read_text())['vehicle'] == 'crazyflie'
+    assert format_summary(flight.summary).splitlines()[0].startswith('flight: pid on "hover", vehicle crazyflie (')
+    assert '; vehicle: crazyflie; ' in (tmp_path / 'run' / 'report.md').read_text()
+    assert read_flight(tmp_path / 'run' / 'bag').summary['vehicle'] == 'crazyflie'
 
 
 # ---------------------------------------------------------------- layouts in the vehicle file

@@ -14,6 +14,7 @@ element and an error names the vehicle index.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -411,3 +412,23 @@ def load_vehicle_file(path: str | Path | None = None) -> tuple[VehicleParams, Di
         raise ParameterError(f'vehicle file {path}: not valid YAML ({error})') from error
     _check_keys(str(path), document or {}, ['vehicle', 'disturbances'])
     return VehicleParams.from_mapping(document['vehicle']), Disturbances.from_mapping(document['disturbances'])
+
+
+@functools.lru_cache(maxsize=None)
+def _shipped_params() -> tuple[tuple[str, VehicleParams], ...]:
+    return tuple((name, load_vehicle_file(path)[0]) for name, path in shipped_vehicles().items())
+
+
+def vehicle_name(params: VehicleParams | None = None, path: str | Path | None = None) -> str:
+    """What to call a flight's vehicle in its summary, console and report: the shipped vehicle's name
+    ('paper', 'crazyflie', 'hummingbird', 'x500') when ``path`` (a vehicle file or name, as ``--vehicle``
+    takes it) is a shipped one, else the path as given; without a path, the name of the shipped vehicle
+    whose parameters ``params`` are, else 'custom' (a batch's per-vehicle arrays: 'custom' too)."""
+    if path is not None:
+        located = locate_vehicle(path).resolve()
+        return next((name for name, file in shipped_vehicles().items() if file.resolve() == located), str(path))
+    if params is None:
+        return 'paper'
+    if isinstance(params.m, np.ndarray):
+        return 'custom'
+    return next((name for name, shipped in _shipped_params() if shipped == params), 'custom')

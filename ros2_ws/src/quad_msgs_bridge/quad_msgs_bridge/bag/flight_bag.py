@@ -30,7 +30,7 @@ from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND, nanoseconds
 from quad_msgs_bridge.urdf import description_messages
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
+from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, vehicle_name
 
 
 def select_topics(names: Sequence[str] | None) -> tuple[TopicSpec, ...]:
@@ -80,8 +80,11 @@ def vehicle_custom_data(custom: dict, namespace: str | None) -> dict:
 
 
 def flight_custom_data(params: VehicleParams, settle_time: float, **info) -> dict[str, str]:
-    """Bag custom data of a flight: vehicle parameters (JSON), settle time [s] and labels (controller, ...)."""
-    return {'vehicle': json.dumps(dataclasses.asdict(params)), 'settle_time_s': repr(float(settle_time)),
+    """Bag custom data of a flight: vehicle parameters (JSON) and name (``vehicle_name``: the shipped vehicle
+    whose parameters they are, else 'custom', unless ``info`` names it, e.g. by its file), settle time [s] and
+    labels (controller, ...)."""
+    return {'vehicle': json.dumps(dataclasses.asdict(params)), 'vehicle_name': vehicle_name(params),
+            'settle_time_s': repr(float(settle_time)),
             **{key: str(value) for key, value in info.items()}}
 
 

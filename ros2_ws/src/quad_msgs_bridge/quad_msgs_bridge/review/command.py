@@ -23,7 +23,8 @@ from quad_msgs_bridge.output_path import output_path
 from quad_msgs_bridge.review.flight_from_bag import BagFlight, fleet_namespaces, read_flight
 from quad_msgs_bridge.review.plots import plot_flights
 from quad_msgs_bridge.review.report import text_table, write_html, write_markdown
-from quad_msgs_bridge.review.verdict import failures, max_error_of, planned_duration
+from quad_msgs_bridge.review.summary import flight_summary, recorded_vehicle
+from quad_msgs_bridge.review.verdict import max_error_of, planned_duration
 
 #: what a review writes into its output folder
 REVIEW_FILES = ('review.json', 'report.md', 'report.html', 'plots')
@@ -69,12 +70,13 @@ def with_failure(metrics: dict, flight: BagFlight) -> dict:
     """``metrics`` with the flight's verdict as ``summary.json`` has it (quad_msgs_bridge.review.verdict):
     ``failure`` (why a failure rule stopped it, None if none did, as far as its bag records) and
     ``failure_time_s`` [s, sim time], ``ended_early`` (why and where it ended before its planned length,
-    None if it did not), ``planned_duration_s`` (None: not recorded), ``failures`` and ``flight_ok``."""
+    None if it did not), ``planned_duration_s`` (None: not recorded), ``failures`` and ``flight_ok``; and
+    ``vehicle``, its name."""
     failure, custom = flight.failure, flight.custom_data
-    found = failures(metrics, flight.ending, max_error_of(custom))
-    return {**metrics, 'failure': None if failure is None else failure[0],
-            'failure_time_s': None if failure is None else failure[1], 'ended_early': flight.ending,
-            'planned_duration_s': planned_duration(custom), 'failures': found, 'flight_ok': not found}
+    return flight_summary(metrics, ended=flight.ending, max_error=max_error_of(custom),
+                          failure=None if failure is None else failure[0],
+                          failure_time_s=None if failure is None else failure[1],
+                          planned_duration_s=planned_duration(custom), vehicle=recorded_vehicle(flight))
 
 
 def failure_note(label: str, metrics: dict) -> str:

@@ -12,6 +12,7 @@ from the bag's custom data, else from a vehicle file.
 from __future__ import annotations
 
 import json
+import os
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,9 +35,10 @@ from quad_msgs_bridge.fast_cdr import (LayoutMismatch, decode_multi_array_rows, 
 from quad_msgs_bridge.frames import yaws_from_quaternions
 from quad_msgs_bridge.review.flight_data import MAX_ROWS, Flight, FlightLog
 from quad_msgs_bridge.review.metrics import FlightRecord, default_settle_time, flight_metrics, has_fuzzy_term
+from quad_msgs_bridge.review.summary import bag_summary
 from quad_msgs_bridge.review.verdict import ending
 from quad_msgs_bridge.state import state_from_odometry, states_from_odometry_rows
-from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
+from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
 
 #: FlightLog rows that no flight reaches: every control step kept
 EVERY_STEP = 1 << 62
@@ -347,7 +349,12 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     record -s mcap``) is read a block of chunks at a time, each block's messages decoded together as arrays
     (where a topic's messages share one layout; else, and for other storage, message by message). With
     ``progress`` (None: for a bag file over PROGRESS_BYTES) a progress bar on stderr shows the bytes read.
+    Its ``summary`` is :func:`~quad_msgs_bridge.review.summary.bag_summary`: the keys of ``fly()``'s summary
+    that the bag (or the run's summary.json beside it) gives. ParameterError if ``bag`` is not a path.
     """
+    if not isinstance(bag, (str, os.PathLike)) or not str(bag).strip():
+        raise ParameterError(f'read_flight: bag: expected the path of a bag folder or .mcap file (a str or Path), '
+                             f'got {bag!r}')
     bag = Path(bag)
     check_bag_path(bag)
     has_mcap = bag.suffix == '.mcap' or (bag.is_dir() and any(bag.glob('*.mcap')))
@@ -378,4 +385,5 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     flight = log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
                         warnings=warnings)
     flight.ended_early = flight.ending is not None
+    flight.summary = bag_summary(flight)
     return flight

@@ -1,8 +1,8 @@
 """The review's metrics table (text for the terminal) and one-page report (``report.md``, ``report.html``).
 
 One column per flight, so a comparison (e.g. NNIT2FSMC against sign SMC) reads across a row. The
-report also says what was flown (controller, scenario, disturbances, seeds: from the bag's custom
-data), whether and when the flight failed, and what each metric means.
+report also says what was flown (controller, scenario, vehicle, disturbances, seeds: from the bag's
+custom data), whether and when the flight failed, and what each metric means.
 """
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from typing import Sequence
 
 from quad_msgs_bridge.conversions import SUBSYSTEM_NAMES
 from quad_msgs_bridge.mixer import CONTROL_NAMES, CONTROL_UNITS
+from quad_msgs_bridge.review.summary import recorded_vehicle
 
 NOT_RECORDED = 'not recorded'
 #: (custom data key, what it says) of the flight description
@@ -138,10 +139,12 @@ def text_table(labels: Sequence[str], metrics: Sequence[dict]) -> str:
 
 def flight_facts(flight, metrics: dict) -> list[tuple[str, str]]:
     """(what, value) describing a reviewed flight (a :class:`~quad_msgs_bridge.review.flight_from_bag.BagFlight`)
-    with its ``metrics`` and verdict: what was flown (the bag's custom data), whether and why it failed, and
-    its bag."""
+    with its ``metrics`` and verdict: what was flown (the bag's custom data; the vehicle by name,
+    :func:`~quad_msgs_bridge.review.summary.recorded_vehicle`), whether and why it failed, and its bag."""
     custom = flight.custom_data
-    return ([(name, str(custom.get(key) or NOT_RECORDED)) for key, name in FLIGHT_FACTS]
+    return ([(name, str(custom.get(key) or NOT_RECORDED)) for key, name in FLIGHT_FACTS[:2]]
+            + [('vehicle', recorded_vehicle(flight))]
+            + [(name, str(custom.get(key) or NOT_RECORDED)) for key, name in FLIGHT_FACTS[2:]]
             + [(name, str(custom[key])) for key, name in CAMPAIGN_FACTS if key in custom]
             + [('result', describe_result(metrics))]
             + [('bag', str(flight.path))])
