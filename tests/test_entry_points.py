@@ -1,6 +1,8 @@
 """The entry points as a new user meets them: ``python3 run_stack.py`` with a Python that lacks the stack's
 packages, and what ``--help`` tells (subcommands, caps)."""
+import inspect
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -68,3 +70,25 @@ def test_setup_venv_runs_pip_only_when_the_requirements_change(tmp_path):
     requirements.write_text('# nothing to install, changed\n')
     changed = setup(**pip_fails)
     assert changed.returncode != 0 and 'absent-constraints.txt' in changed.stderr, changed.stderr   # pip ran
+
+
+def run_stack_subcommands() -> list[str]:
+    """The subcommands run_stack.py dispatches (flight_stack.cli.run: ``argv[:1] == ['review']``, ...)."""
+    from flight_stack import cli
+    return sorted(set(re.findall(r"\['([a-z][a-z0-9-]*)'\]", inspect.getsource(cli.run))))
+
+
+@pytest.mark.skipif(not (ROOT / '.venv' / 'bin' / 'python').exists(), reason='no .venv in this clone')
+def test_fly_sh_passes_every_subcommand_of_run_stack_on():
+    """Issue 35: `bash scripts/fly.sh tune|stress|export ...` said `unrecognized arguments`: fly.sh passed on
+    only the subcommands it listed. Each one now gets its own parser (its usage line names it)."""
+    subcommands = run_stack_subcommands()
+    assert {'campaign', 'tune', 'stress', 'review', 'recover', 'export', 'rosbag2-qos'} <= set(subcommands)
+    for subcommand in subcommands:
+        result = subprocess.run(['bash', str(ROOT / 'scripts' / 'fly.sh'), subcommand, '--help'], cwd=ROOT,
+                                capture_output=True, text=True)
+        assert result.returncode == 0, (subcommand, result.stderr)
+        assert re.match(rf'usage: (run_stack\.py )?{re.escape(subcommand)} ', result.stdout), (subcommand, result.stdout)
+    flight = subprocess.run(['bash', str(ROOT / 'scripts' / 'fly.sh'), '--help'], cwd=ROOT, capture_output=True,
+                            text=True)
+    assert flight.returncode == 0 and flight.stdout.startswith('usage: run_stack.py [-h]'), flight.stderr
