@@ -249,6 +249,13 @@ def test_a_fixed_value_the_vehicle_cannot_take_is_refused_naming_the_key(vehicle
     (['tune', '--controller', 'pid', '--trials', '0'], '--trials'),
     (['stress', '--kind', 'mass', '--high', '2.5'], '--high: 2.5 is above'),
     (['stress', '--kind', 'wind', '--low', '5', '--high', '5'], '--low, --high'),
+    # issue 35: these flew (30 s, then a traceback) before they were refused
+    (['stress', '--kind', 'rotor-loss', '--high', '2'],
+     "error: --high (--kind rotor-loss: one rotor's efficiency loss [-]): 2.0 is outside the valid range [0.0, 1.0)\n"),
+    (['stress', '--kind', 'mass', '--low', '-1'],
+     'error: --low (--kind mass: true mass / nominal mass [-]): -1.0 is outside the valid range (0.0, inf)\n'),
+    (['stress', '--kind', 'delay', '--low', 'nan'], 'error: --low (--kind delay: transport delay [s]): must be finite'),
+    (['stress', '--kind', 'noise', '--high', '-3'], 'error: --high (--kind noise: sensor noise scale [-]): -3.0 is'),
 ])
 def test_the_commands_refuse_bad_options_before_flying(tmp_path, capsys, argv, message):
     from flight_stack.cli import run

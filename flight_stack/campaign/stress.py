@@ -16,6 +16,9 @@ noise      sensor noise scale [-]                         every ``sensor_noise``
                                                           (SPEC's; :data:`DEFAULT_NOISE` if it has none)
 ========== ============================================== =========================================
 
+An intensity must mean something: at least 0 (wind, delay, motor lag, noise), above 0 (mass), in [0, 1)
+(rotor loss); ``--low`` and ``--high`` outside are refused (:meth:`DisturbanceKind.check`) before any flight.
+
 A flight succeeds when it finishes with a position RMSE below 10 cm. The breaking point is the
 intensity where the success share falls below 90 %: found by bisection between the range's ends
 (success assumed to fall as the intensity grows), to the kind's resolution. Each try's share comes
@@ -31,7 +34,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.vehicle_params import ParameterError, check_number
 
 from .batch import CampaignSetup
 from .results import FLIGHTS_FILE, read_flights, wilson_interval
@@ -70,13 +73,21 @@ class DisturbanceKind:
     high: float
     resolution: float               #: bisection stops when the bracket is this narrow
     fixed: Callable[[CampaignSpec, float], CampaignSpec]
+    #: the intensities that mean something: (lowest, highest, lowest included, highest included)
+    valid: tuple[float, float, bool, bool] = (0.0, math.inf, True, True)
+
+    def check(self, option: str, intensity: float) -> float:
+        """``intensity`` if it lies in :attr:`valid`, else ParameterError naming ``option``, the kind and the
+        valid range."""
+        return check_number(f'{option} (--kind {self.name}: {self.intensity})', intensity, *self.valid)
 
 
 KINDS = {kind.name: kind for kind in (
     DisturbanceKind('wind', 'steady wind speed [m/s]', 0.0, 20.0, 0.25, _wind),
-    DisturbanceKind('mass', 'true mass / nominal mass [-]', 1.0, 3.0, 0.02, _vehicle('mass', 1.0)),
+    DisturbanceKind('mass', 'true mass / nominal mass [-]', 1.0, 3.0, 0.02, _vehicle('mass', 1.0),
+                    (0.0, math.inf, False, True)),
     DisturbanceKind('rotor-loss', "one rotor's efficiency loss [-]", 0.0, 0.95, 0.01,
-                    _vehicle('one_rotor_efficiency_loss', 0.0)),
+                    _vehicle('one_rotor_efficiency_loss', 0.0), (0.0, 1.0, True, False)),
     DisturbanceKind('delay', 'transport delay [s]', 0.0, 0.1, 0.001,
                     lambda spec, x: replace(spec, delay_s=x)),
     DisturbanceKind('motor-lag', 'motor time constant [s]', 0.0, 0.5, 0.005,

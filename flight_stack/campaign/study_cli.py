@@ -111,8 +111,9 @@ def stress_main(argv: list[str]) -> int:
         resolution = args.resolution if args.resolution is not None else resolution_for(kind, spec, options)
         if not resolution > 0.0:
             raise ParameterError(f'--resolution: {resolution:g} must be > 0')
-        low = snap(kind.low if args.low is None else args.low, resolution)
-        high = snap(kind.high if args.high is None else args.high, resolution)
+        low = kind.check('--low', snap(kind.check('--low', kind.low if args.low is None else args.low), resolution))
+        high = kind.check('--high', snap(kind.check('--high', kind.high if args.high is None else args.high),
+                                         resolution))
         limit = highest_intensity(kind, spec, options, resolution)
         if high > limit:
             if args.high is not None:
