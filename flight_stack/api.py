@@ -27,7 +27,9 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from nnit2fsmc_controller.controller import CascadedController, ControlOutput
-from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, load_gains
+from nnit2fsmc_controller.contract import Gain
+from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, choose_controller, load_gains
+from nnit2fsmc_controller.registry import ControllerKind, controller_name, register
 from nnit2fsmc_controller.se3 import SE3Controller
 from nnit2fsmc_controller.trajectory import SCENARIOS
 from quad_msgs_bridge.reference import ReferenceSample as Reference, hold
@@ -35,31 +37,34 @@ from quad_msgs_bridge.review.flight_data import Flight
 from quad_msgs_bridge.review.flight_from_bag import read_flight
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
 
-__all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'Flight', 'ParameterError',
-           'Reference', 'SE3Controller', 'VehicleParams', 'fly', 'hold', 'load_gains', 'load_vehicle',
-           'make_controller', 'read_flight', 'run_campaign']
+__all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'ControllerKind', 'Flight', 'Gain',
+           'ParameterError', 'Reference', 'SE3Controller', 'VehicleParams', 'fly', 'hold', 'load_gains',
+           'load_vehicle', 'make_controller', 'read_flight', 'register', 'run_campaign']
 
 
 def load_vehicle(path: str | Path | None = None) -> VehicleParams:
     """The vehicle description (paper Table I, SI units) of a vehicle YAML or of a shipped vehicle by name
-    ('paper', 'crazyflie', 'hummingbird', 'x500': docs/VEHICLES.md); None: the packaged one (the paper's)."""
+    ('paper', 'crazyflie', 'hummingbird', 'x500', 'px4-sih-quadx': docs/VEHICLES.md); None: the packaged one
+    (the paper's). ParameterError on anything else."""
+    if path is not None and not isinstance(path, (str, Path)):
+        raise ParameterError(f'vehicle: expected a vehicle YAML path or a shipped vehicle\'s name, got {path!r}')
     return load_vehicle_file(path)[0]
 
 
-def make_controller(kind: str = 'nnit2fsmc', vehicle: VehicleParams | str | Path | None = None,
-                    gains: Mapping[str, Any] | str | Path | None = None,
-                    batch: int | None = None) -> CascadedController | SE3Controller:
-    """A fresh controller of ``kind`` (one of CONTROLLERS) for the nominal ``vehicle`` (a VehicleParams
-    or a vehicle YAML; None: the packaged one) with ``gains`` (a gains mapping or YAML; None: the
-    packaged ones). Raises ParameterError naming an invalid value."""
+def make_controller(kind='nnit2fsmc', vehicle: VehicleParams | str | Path | None = None,
+                    gains: Mapping[str, Any] | str | Path | None = None, batch: int | None = None):
+    """A fresh controller of ``kind`` for the nominal ``vehicle`` (a VehicleParams, a vehicle YAML or a
+    shipped vehicle's name; None: the packaged one) with ``gains`` (a gains mapping or YAML, whole or only
+    the gains it changes over the packaged set; None: the packaged ones). ``kind``: a built-in kind
+    (CONTROLLERS), an installed controller's entry point, ``module:Class``, or your controller class itself
+    (docs/CONTROLLERS.md). Raises ParameterError naming an invalid value."""
+    kind = controller_name(kind)
     if not isinstance(vehicle, VehicleParams):
         vehicle = load_vehicle(vehicle)
-    if gains is None or isinstance(gains, (str, Path)):
-        gains = load_gains(gains)
-    return build_controller(kind, vehicle, gains, batch=batch)
+    return build_controller(kind, vehicle, load_gains(gains, kind=kind), batch=batch)
 
 
-def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: float | None = None,
+def fly(controller=None, scenario: str = 'paper', *, duration: float | None = None,
         disturbances: bool | None = None, seed: int = 0, vehicle: VehicleParams | str | Path | None = None,
         gains: Mapping[str, Any] | str | Path | None = None, physics_rate: float = 1000.0,
         settle_time: float | None = None,
@@ -73,9 +78,10 @@ def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: flo
     ``controls``, ``surfaces``, ``equivalent``, ``corrective``; ``to_pandas()``), ``metrics()``, and
     ``summary``, the content of ``summary.json`` (rmse_position_m, max_position_error_m, chattering, ...).
 
-    ``vehicle`` is the controller's nominal model (a VehicleParams or a vehicle YAML; None: the packaged
-    one); ``gains`` a whole gains mapping (as :func:`make_controller` takes it) or a gains YAML (None: the
-    packaged one). The world, as a campaign spec's keys of the same names mean it (docs/CAMPAIGNS.md), checked by
+    ``controller`` is what :func:`make_controller` takes as ``kind`` (a name, or your controller class); None:
+    the gains file's ``controller:``, else nnit2fsmc. ``vehicle`` is the controller's nominal model (a
+    VehicleParams or a vehicle YAML; None: the packaged one); ``gains`` a gains mapping or YAML, whole or only
+    the gains it changes over the packaged set (None: the packaged one). The world, as a campaign spec's keys of the same names mean it (docs/CAMPAIGNS.md), checked by
     the same code:
 
     * ``true_vehicle``: the vehicle the simulator flies (VehicleParams or YAML; None: the nominal one);
@@ -97,6 +103,7 @@ def fly(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, duration: flo
     ParameterError (a ValueError) naming the argument before flying on any invalid setting.
     """
     from .cli import run_flight
+    controller = choose_controller(None if controller is None else controller_name(controller), gains)
     return run_flight(controller, scenario, duration=duration, disturbances=disturbances, seed=seed,
                       vehicle=vehicle, gains=gains, physics_rate=physics_rate, settle_time=settle_time,
                       max_error=max_error, out=out, overwrite=overwrite, true_vehicle=true_vehicle, wind=wind,

@@ -64,7 +64,7 @@ class CampaignSetup:
         nominal, disturbances = load_vehicle_file(vehicle_file)
         if spec.disturbances is not None:
             disturbances = disturbances.switched(spec.disturbances)
-        gains = load_gains(gains_file)
+        gains = load_gains(gains_file, kind=spec.controllers)
         if spec.control_rate_hz is not None:
             gains.setdefault('common', {})['control_rate'] = spec.control_rate_hz
         if not spec.measurement_filters:

@@ -32,6 +32,7 @@ from typing import Iterator
 import yaml
 
 from nnit2fsmc_controller.factory import gains_flown_by
+from nnit2fsmc_controller.registry import controller_kind
 from quad_msgs_bridge.vehicle_params import ParameterError
 
 from ..interrupts import stop_signals
@@ -366,6 +367,10 @@ def _compile(spec: CampaignSpec, options: RunOptions) -> None:
     """Compile the kernels (or load them from numba's cache) here, said with the time it took."""
     say = (lambda text, end='\n': print(text, end=end, file=sys.stderr, flush=True)) if options.progress \
         else (lambda text, end='\n': None)
+    for kind in map(controller_kind, spec.controllers):
+        if not kind.batched:
+            say(f'note: {kind.name} steps a batch vehicle by vehicle (it declares no batched update: '
+                'docs/CONTROLLERS.md): correct, and slower than a batched kind')
     say('compiling kernels (numba; loaded from its cache after the first time)...', end=' ')
     started = time.perf_counter()
     compile_kernels(spec, options.vehicle_file, options.gains_file)

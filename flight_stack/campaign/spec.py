@@ -54,6 +54,7 @@ from typing import Any, Mapping
 import yaml
 
 from nnit2fsmc_controller.factory import CONTROLLERS
+from nnit2fsmc_controller.registry import check_controller
 from quad_sim.plants import DEFAULT_PLANT, check_plant
 from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
 from quad_msgs_bridge.vehicle_params import ParameterError, check_number
@@ -209,10 +210,10 @@ def _controllers(value, key: str) -> tuple[str, ...]:
     if isinstance(value, str):
         value = [name.strip() for name in value.split(',') if name.strip()]
     if not isinstance(value, (list, tuple)) or not value:
-        raise ParameterError(f'{key}: expected a non-empty list of controllers ({", ".join(CONTROLLERS)})')
+        raise ParameterError(f'{key}: expected a non-empty list of controllers ({", ".join(CONTROLLERS)}, an installed '
+                             'controller\'s name or module:Class)')
     for name in value:
-        if name not in CONTROLLERS:
-            raise ParameterError(f'{key}: {name!r} is not one of {", ".join(CONTROLLERS)}')
+        check_controller(name, key)
     if len(set(value)) != len(value):
         raise ParameterError(f'{key}: a controller is listed twice in {list(value)}')
     return tuple(value)

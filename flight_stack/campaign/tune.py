@@ -95,7 +95,7 @@ class TuneSetup:
                 'vehicle_file': self.options.vehicle_file, 'starting_gains': _digest(self.starting_gains())}
 
     def starting_gains(self) -> dict:
-        return load_gains(self.options.gains_file)
+        return load_gains(self.options.gains_file, kind=self.kind)
 
 
 def _digest(document) -> str:

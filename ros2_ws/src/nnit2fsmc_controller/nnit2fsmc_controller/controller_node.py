@@ -42,6 +42,7 @@ from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
 
 from .factory import (CONTROLLERS, build_controller, build_measurement_stage, compile_kernels, flatten_gains,
                       gain_choices, gain_description, load_gains, unflatten_gains)
+from .registry import check_controller, controller_kind
 from .tuning import restart_reason, retune, retune_measurement
 from .trajectory import Waypoints
 
@@ -53,7 +54,10 @@ class ControllerNode(Node):
         super().__init__('nnit2fsmc_controller')
         self.kit = kit
         restart = 'read when the node starts'
-        kind = declare(self, 'controller', 'nnit2fsmc', 'control law', choices=CONTROLLERS, read_only=restart)
+        kind = check_controller(declare(self, 'controller', 'nnit2fsmc',
+                                        'control law: a built-in kind (' + ', '.join(CONTROLLERS) + '), an installed '
+                                        'controller\'s entry point, or module:Class', read_only=restart),
+                                'parameter controller')
         vehicle_file = declare(self, 'vehicle_file', '', 'vehicle YAML (nominal model); empty: the packaged one',
                                read_only=restart)
         gains_file = declare(self, 'gains_file', '', 'gains YAML used as defaults; empty: the packaged one',
@@ -67,7 +71,16 @@ class ControllerNode(Node):
                               read_only=restart)
         self.params, _ = load_vehicle_file(vehicle_file or None)
         self.flat_gains = {}
-        for name, default in flatten_gains(load_gains(gains_file or None)).items():
+        schema = controller_kind(kind).schema or {}
+        section = controller_kind(kind).gains_section
+        for name, default in flatten_gains(load_gains(gains_file or None, kind=kind)).items():
+            gain = schema.get(name[len(section) + 1:]) if name.startswith(section + '.') else None
+            if gain is not None:   # a user kind's gain: its schema's range and meaning
+                finite = math.isfinite(gain.low) and math.isfinite(gain.high) and isinstance(default, float)
+                bounds = (gain.low, gain.high) if finite else None
+                self.flat_gains[name] = declare(self, name, default, f'{gain.description} [{gain.unit}]', bounds,
+                                                read_only=None)
+                continue
             if isinstance(default, str):
                 bounds, choices = None, gain_choices(name)
             else:

@@ -15,8 +15,9 @@ from quad_msgs_bridge.mixer import ALLOCATIONS
 from quad_msgs_bridge.reference import SetpointPath, hold
 from quad_msgs_bridge.state import odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
+from quad_msgs_bridge.yaml_files import load_yaml
 
-load_yaml = yaml.safe_load   # placeholder until the shared loader lands
+
 
 from .axis_laws import NNIT2FSMCLaw
 from .controller import ATTITUDE_RATES, AXES, CascadedController
@@ -121,11 +122,12 @@ def read_gains_file(path: str | Path) -> GainsFile:
     return GainsFile(path, ros_parameters(document), declared.get('controller'), declared.get('base'))
 
 
-def load_gains(path: str | Path | Mapping[str, Any] | None = None, *, kind: str | None = None) -> dict:
+def load_gains(path: str | Path | Mapping[str, Any] | None = None, *,
+               kind: str | Sequence[str] | None = None) -> dict:
     """The whole gains tree of ``path``: a gains file or a named set (:func:`locate_gains`), or a mapping,
     merged over the gains it changes (its ``base:``, else the packaged set), so a file may hold one key
     only; None: the packaged set. With ``kind``, a user's kind's section holds its defaults too. Errors
-    name the file and the gain (an unknown one with the closest valid name)."""
+    name the file and the gain (an unknown one with the closest valid name). ``kind`` may list several kinds."""
     if path is None:
         tree = _read_tree(DEFAULT_CONTROLLER_FILE)
     elif isinstance(path, Mapping):
@@ -134,8 +136,8 @@ def load_gains(path: str | Path | Mapping[str, Any] | None = None, *, kind: str 
         read = read_gains_file(path)
         base = DEFAULT_CONTROLLER_FILE if read.base is None else _base_path(read)
         tree = merged(load_gains(base) if base != read.path else {}, read.gains, f'controller file {read.path}: ')
-    if kind is not None:
-        described = controller_kind(kind)
+    for name in [kind] if isinstance(kind, str) else kind or ():
+        described = controller_kind(name)
         if described.schema is not None:
             tree[described.gains_section] = section_gains(described, tree)
     try:

@@ -191,6 +191,34 @@ def _resolve(name: str) -> ControllerKind:
                          f'known: {", ".join(known)}; or name your own class as module:Class (docs/CONTROLLERS.md)')
 
 
+def register(value: Any, name: str | None = None) -> str:
+    """Register a contract class (or a ControllerKind) of this process under ``name`` (default
+    ``module:Class``) and return the name to fly it by: for a class defined in a script or a notebook.
+    Worker processes of a campaign import ``module:Class`` themselves, so a class of ``__main__`` flies
+    single flights only; give a campaign a class of an importable module."""
+    if name is None:
+        name = value.name if isinstance(value, ControllerKind) else f'{value.__module__}:{value.__qualname__}'
+    kind = kind_of(name, value, f'registered {name}')
+    if name in built_in_kinds() or (name in _RESOLVED and _RESOLVED[name] != kind):
+        raise ParameterError(f'controller {name!r}: a kind of that name exists already')
+    _RESOLVED[name] = kind
+    return name
+
+
+def controller_name(value: Any) -> str:
+    """The kind name of ``value``: a name as it is, a contract class or a ControllerKind registered
+    (:func:`register`); a built controller is refused (a flight builds a fresh one)."""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (type, ControllerKind)):
+        name = value.name if isinstance(value, ControllerKind) else f'{value.__module__}:{value.__qualname__}'
+        return name if name in _RESOLVED else register(value, name)
+    if callable(getattr(value, 'update', None)) and isinstance(getattr(value, 'name', None), str):
+        raise ParameterError(f'controller: got a built {value.name} controller; a flight builds a fresh one from its '
+                             f'kind: pass controller={value.name!r} (or your controller class) and its gains=')
+    raise ParameterError(f'controller: expected a kind name, a controller class or a ControllerKind, got {value!r}')
+
+
 def check_controller(name: str, option: str = 'controller') -> str:
     """``name`` if it names a kind, else ParameterError saying so under ``option``."""
     try:

@@ -35,13 +35,15 @@ def retune(controller: CascadedController, gains: Mapping[str, Any], batch: int 
     """A controller of the same kind for ``gains`` that goes on from ``controller``'s state.
 
     Raises ParameterError (naming the gain) if the gains are invalid, or if they change what cannot
-    change in flight (the control period, the network sizes).
+    change in flight (the control period, the network sizes). A user's kind (nnit2fsmc_controller.contract)
+    declares no STATE: its controller starts afresh with the new gains.
     """
     fresh = build_controller(controller.name, controller.params, gains, batch=batch)
     if fresh.dt != controller.dt:
         raise ParameterError(f'common.control_rate: cannot change in flight ({RESTART_GAINS["common.control_rate"]}); '
                              'restart the controller')
-    _carry_state(controller, fresh, 'controller')
+    if has_state(controller):   # a user's kind declares no state to carry: it starts afresh with the new gains
+        _carry_state(controller, fresh, 'controller')
     return fresh
 
 
