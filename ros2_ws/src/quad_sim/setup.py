@@ -24,5 +24,6 @@ setup(
     extras_require={'test': ['pytest']},
     entry_points={'console_scripts': [
         'quad_sim = quad_sim.sim_node:main',
+        'px4_bridge = quad_sim.px4_node:main',
     ]},
 )
