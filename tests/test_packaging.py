@@ -15,8 +15,8 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ('flight_stack', 'quad_msgs_bridge', 'quad_sim', 'nnit2fsmc_controller')
 #: modules that import rclpy (the node modules and their helpers): importable only with ROS 2
-ROS_ONLY = {'quad_msgs_bridge.ros_helpers', 'quad_msgs_bridge.bag.recorder_node', 'quad_sim.sim_node', 'quad_sim.px4_node',
-            'nnit2fsmc_controller.controller_node', 'nnit2fsmc_controller.trajectory_node'}
+ROS_ONLY = {'quad_msgs_bridge.ros_helpers', 'quad_msgs_bridge.bag.recorder_node', 'quad_sim.sim_node',
+            'quad_sim.px4_node', 'nnit2fsmc_controller.controller_node', 'nnit2fsmc_controller.trajectory_node'}
 ROS_MODULES = {'rclpy', 'rcl_interfaces'}
 PIP = [sys.executable, '-m', 'pip', '--disable-pip-version-check', '--quiet']
 

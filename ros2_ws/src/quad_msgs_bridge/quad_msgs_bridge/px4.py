@@ -11,7 +11,7 @@ quantity              ours (:mod:`quad_msgs_bridge.state`)                 PX4 (
 ====================  ==================================================  ==============================================
 position              x, y, z [m, world ENU]                               ``position`` [m, world NED] (pose_frame 1)
 attitude              phi, theta, psi [rad], Z-Y-X, body FLU in ENU        ``q`` [w, x, y, z], body FRD -> world NED
-velocity              vx, vy, vz [m/s, world ENU]                          ``velocity`` [m/s], world NED (velocity_frame 1)
+velocity              vx, vy, vz [m/s, world ENU]                          ``velocity`` [m/s], NED (velocity_frame 1)
                                                                            or body FRD (velocity_frame 3)
 angular velocity      dphi, dtheta, dpsi [rad/s], Euler-angle rates        ``angular_velocity`` [rad/s, body FRD]
 ====================  ==================================================  ==============================================
@@ -295,8 +295,8 @@ def wrench_scales(params: VehicleParams, geometry: Px4RotorGeometry = SIH_QUADX)
     """What a unit normalised setpoint gives on our vehicle through PX4's allocation (before saturation): torque
     about FRD x, y, z [N m] per unit of VehicleTorqueSetpoint.xyz and thrust [N] per unit of -VehicleThrustSetpoint.z.
 
-    It is the diagonal of (our rotors' effectiveness) x (PX4's normalised allocation :meth:`Px4RotorGeometry.allocation`);
-    ValueError where that product is not diagonal (PX4's geometry does not describe our vehicle: a roll setpoint
+    It is the diagonal of (our rotors' effectiveness) x (PX4's normalised allocation,
+    :meth:`Px4RotorGeometry.allocation`); ValueError where that product is not diagonal (PX4's geometry does not describe our vehicle: a roll setpoint
     would also pitch). For PX4's SIH vehicle: 2 sqrt 2 SIH_L_ROLL SIH_T_MAX roll and pitch, 4 SIH_Q_MAX yaw,
     4 SIH_T_MAX thrust."""
     order = motor_order(params, geometry)
@@ -305,7 +305,8 @@ def wrench_scales(params: VehicleParams, geometry: Px4RotorGeometry = SIH_QUADX)
     diagonal = np.diag(product).copy()
     off = product - np.diag(diagonal)
     if np.any(np.abs(off) > 1e-9 * np.max(np.abs(diagonal))) or np.any(diagonal <= 0.0):
-        raise ValueError(f'PX4 geometry does not allocate our vehicle axis by axis: wrench per unit setpoint\n{product}')
+        raise ValueError(f'PX4 geometry does not allocate our vehicle axis by axis: wrench per unit setpoint\n'
+                         f'{product}')
     return tuple(float(v) for v in diagonal)
 
 
