@@ -297,8 +297,8 @@ def wrench_scales(params: VehicleParams, geometry: Px4RotorGeometry = SIH_QUADX)
 
     It is the diagonal of (our rotors' effectiveness) x (PX4's normalised allocation,
     :meth:`Px4RotorGeometry.allocation`); ValueError where that product is not diagonal (PX4's geometry does not
-    describe our vehicle: a roll setpoint would also pitch). For PX4's SIH vehicle: 2 sqrt 2 SIH_L_ROLL SIH_T_MAX roll and pitch, 4 SIH_Q_MAX yaw,
-    4 SIH_T_MAX thrust."""
+    describe our vehicle: a roll setpoint would also pitch). For PX4's SIH vehicle: 2 sqrt 2 SIH_L_ROLL SIH_T_MAX
+    roll and pitch, 4 SIH_Q_MAX yaw, 4 SIH_T_MAX thrust."""
     order = motor_order(params, geometry)
     mix = geometry.allocation()[:, [0, 1, 2, 5]]
     product = rotor_effectiveness(params, order) @ mix     # [3, 3]: thrust z [N] per unit of z setpoint, both down
