@@ -4,6 +4,9 @@ The campaigns fly on an in-process Dask cluster (what --scheduler names), so the
 start-up; the flights are few and short."""
 import csv
 import math
+import subprocess
+import sys
+from pathlib import Path
 
 import distributed
 import numpy as np
@@ -26,6 +29,7 @@ DOCUMENT = {'scenario': 'paper', 'duration': 2.0, 'settle_time': 1.2, 'controlle
             'seed': 0, 'control_rate_hz': 250, 'physics_rate_hz': 500,
             'vehicle': {'mass': 0.1}, 'wind': {'mean_speed_mps': 1.0, 'turbulence': 'light'}}
 SPEC = parse_spec(DOCUMENT)
+ROOT = Path(__file__).resolve().parent.parent
 #: the stress test's: no wind, settled longer (a 2 s flight's take-off transient is near 10 cm RMSE)
 CALM = parse_spec({**{k: v for k, v in DOCUMENT.items() if k != 'wind'}, 'duration': 2.5, 'settle_time': 1.6})
 
@@ -247,6 +251,8 @@ def test_a_fixed_value_the_vehicle_cannot_take_is_refused_naming_the_key(vehicle
     (['tune', '--controller', 'pid', '--trials', '2', '--seeds', '1,x'], '--seeds'),
     (['tune', '--controller', 'smc-sign', '--trials', '2'], 'no search space'),
     (['tune', '--controller', 'pid', '--trials', '0'], '--trials'),
+    (['tune', '--controller', 'pid', '--trials', '2', '--sampler-seed', '-1'],
+     'error: --sampler-seed: -1 is outside the valid range [0, 2147483647] (a whole number)\n'),   # issue 35
     (['stress', '--kind', 'mass', '--high', '2.5'], '--high: 2.5 is above'),
     (['stress', '--kind', 'wind', '--low', '5', '--high', '5'], '--low, --high'),
     # issue 35: these flew (30 s, then a traceback) before they were refused
@@ -264,6 +270,57 @@ def test_the_commands_refuse_bad_options_before_flying(tmp_path, capsys, argv, m
     assert run([*argv, str(spec), '--out', str(tmp_path / 'out')]) == 2
     assert message in capsys.readouterr().err
     assert not (tmp_path / 'out').exists()
+
+
+def test_tune_refuses_an_out_that_is_a_file_in_one_line(tmp_path, capsys):
+    """Issue 35: `tune --out FILE` raised FileExistsError (a traceback)."""
+    from flight_stack.cli import run
+    spec, out = tmp_path / 'spec.yaml', tmp_path / 'taken'
+    spec.write_text(yaml.safe_dump(DOCUMENT))
+    out.write_text('a file\n')
+    assert run(['tune', str(spec), '--controller', 'pid', '--trials', '1', '--out', str(out)]) == 2
+    assert capsys.readouterr().err.splitlines()[-1] == f'error: --out: {out} exists and is not a folder; choose another --out'
+    assert out.read_text() == 'a file\n'
+
+
+def test_ctrl_c_in_tune_says_how_to_continue_in_one_line_and_exits_130(tmp_path):
+    """Issue 35: a Ctrl-C printed Optuna's 30-line traceback of the trial. A real process (Optuna's log handler
+    writes to the process's stderr), whose trial is interrupted as Ctrl-C interrupts it."""
+    spec, out = tmp_path / 'spec.yaml', tmp_path / 'out'
+    spec.write_text(yaml.safe_dump(DOCUMENT))
+    script = (f'import sys; sys.path.insert(0, {str(ROOT)!r})\n'
+              'import flight_stack.campaign.tune as tune\n'
+              'def interrupted(*args, **kwargs):\n    raise KeyboardInterrupt\n'
+              'tune.fly_point = interrupted\n'
+              'from flight_stack.cli import main\n'
+              f'sys.exit(main(["tune", {str(spec)!r}, "--controller", "pid", "--trials", "2", "--out", {str(out)!r}]))\n')
+    result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True)
+    assert result.returncode == 130, result.stderr
+    lines = result.stderr.splitlines()
+    assert lines[-1] == (f'interrupted; run the same command again to continue the study in {out} (the interrupted '
+                         'trial is flown again, its finished flights kept)')
+    assert 'Traceback' not in result.stderr and 'failed' not in result.stderr, result.stderr
+    assert lines[:-1] == ['tune pid: 2 trials x 2 seed(s) 1,2 x 3 flights of "paper", 2 s each -> ' + str(out),
+                          'tune pid: trial 0 (the starting gains): 2 seed(s) x 3 flights']
+
+
+def test_tune_says_each_trial_its_seeds_and_its_objective(scheduler, tmp_path, capsys):
+    """Issue 35: a trial (66 s) printed nothing until it ended. Now: its start, each seed's flights as they
+    finish (the runner's bar) and its score, then the trial's objective."""
+    setup = TuneSetup('pid', SPEC, seeds=(1, 2), trials=1, out_dir=tmp_path, options=RunOptions(scheduler=scheduler))
+    outcome = tune(setup, progress=True)
+    err = capsys.readouterr().err
+    lines = [line for line in err.replace('\r', '\n').splitlines() if line.startswith('tune pid')]
+    assert lines[0] == 'tune pid: trial 0 (the starting gains): 2 seed(s) x 3 flights'
+    assert lines[1].startswith('tune pid: trial 0: seed 1 (1/2) flown: 3/3 finished so far, objective so far ')
+    assert lines[2].startswith('tune pid: trial 0: seed 2 (2/2) flown: 6/6 finished so far, objective so far ')
+    assert lines[3].startswith(f'tune pid: trial 0 (1/1) objective {outcome.best_objective_m * 100:.3f} cm, '
+                               'finished 6/6 in ')
+    assert 'trial 0 seed 1: 100%' in err and 'trial 0 seed 2: 100%' in err and '3/3' in err
+    quiet = TuneSetup('pid', SPEC, seeds=(1,), trials=1, out_dir=tmp_path / 'quiet',
+                      options=RunOptions(scheduler=scheduler))
+    tune(quiet, progress=False)
+    assert capsys.readouterr().err == ''
 
 
 def test_every_search_space_is_a_controller_kind():

@@ -60,6 +60,7 @@ class RunOptions:
     vehicle_file: str | None = None
     gains_file: str | None = None
     report: bool = True                 #: write report.html (with its plots) beside campaign.json
+    progress_label: str = 'campaign'    #: what the progress bar of the flights is called
 
     def worker_count(self) -> int:
         """The local worker processes to use; ParameterError on an invalid --workers or --batch-size."""
@@ -278,16 +279,23 @@ class _LocalPool:
     def close(self, cancel: bool) -> None:
         """Tell the workers to exit once their tasks are done (``cancel``: terminate them now); returns at once
         (:meth:`join` waits for them). Closing again does nothing more."""
+        if self.executor is None:      # closed with cancel before
+            return
         if cancel:
             for process in self.processes:
                 process.terminate()
         self.executor.shutdown(wait=False, cancel_futures=cancel)
+        if cancel:     # the workers are gone at once: wait for them and free the pool's queues now, whose
+            self.join()     # semaphores a stopped command (os._exit) would leave to the resource tracker to
+            self.executor = self.manager = None    # warn of ("leaked semaphore objects")
+            self.processes = []
 
     def join(self) -> None:
         """Wait for the closed pool's workers to exit. The executor's manager thread reaps them: waiting on a
         worker beside it races it for the exit status (the loser's join returns with no exit code yet), so
         this waits for that thread first."""
-        self.manager.join()
+        if self.manager is not None:
+            self.manager.join()
         for process in self.processes:
             process.join()
 
@@ -386,7 +394,8 @@ def _fly_missing(spec: CampaignSpec, out_dir: Path, options: RunOptions, workers
     flights = FlightsFile(out_dir / FLIGHTS_FILE, COLUMNS)
     started = time.perf_counter()
     steps = 0
-    progress = _progress_bar(total, spec.flights * len(spec.controllers) - total, options.progress)
+    progress = _progress_bar(total, spec.flights * len(spec.controllers) - total, options.progress,
+                             options.progress_label)
     cancelled = False
     try:
         pending: set = set()
@@ -421,9 +430,9 @@ def _collect(pool, pending: set, flights: FlightsFile, progress, steps: int) -> 
     return pending - finished, steps
 
 
-def _progress_bar(total: int, already: int, enabled: bool):
+def _progress_bar(total: int, already: int, enabled: bool, label: str = 'campaign'):
     from tqdm import tqdm
-    return tqdm(total=total + already, initial=already, unit='flight', desc='campaign', disable=not enabled,
+    return tqdm(total=total + already, initial=already, unit='flight', desc=label, disable=not enabled,
                 file=sys.stderr, smoothing=0.1)
 
 

@@ -80,7 +80,8 @@ def tune_main(argv: list[str]) -> int:
         print(f'error: {error}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f'interrupted: the same command continues the study in {args.out}', file=sys.stderr)
+        print(f'interrupted; run the same command again to continue the study in {args.out} (the interrupted '
+              'trial is flown again, its finished flights kept)', file=sys.stderr)
         return 130
     print(f'best: trial {outcome.best_trial}, objective {outcome.best_objective_m * 100:.3f} cm '
           f'(starting gains: {outcome.starting_objective_m * 100:.3f} cm), {outcome.trials} trials')

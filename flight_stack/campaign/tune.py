@@ -44,6 +44,8 @@ LOCK_FILE = '.tune.lock'
 REQUIRED_FINISHED_SHARE = 0.99
 #: TPE's random start: trials sampled at random before it models the objective
 STARTUP_TRIALS = 5
+#: the largest --sampler-seed: the sampler's seed is it plus the trials already made, which numpy takes below 2^32
+MAX_SAMPLER_SEED = 2 ** 31 - 1
 
 
 @dataclass(frozen=True)
@@ -89,6 +91,12 @@ class TuneSetup:
     options: RunOptions            #: workers, scheduler, batch size, vehicle file; gains_file: the starting gains
     sampler_seed: int = 0
 
+    def __post_init__(self):
+        seed = self.sampler_seed
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SAMPLER_SEED:
+            raise ParameterError(f'--sampler-seed: {seed!r} is outside the valid range [0, {MAX_SAMPLER_SEED}] '
+                                 '(a whole number)')
+
     def identity(self) -> dict:
         """What makes two runs the same study (kept in the study; a resume must match it)."""
         return {'kind': self.kind, 'spec': self.spec.to_mapping(), 'seeds': list(self.seeds),
@@ -118,7 +126,9 @@ def _optuna():
         import optuna
     except ImportError as error:   # pragma: no cover - optuna is a pinned dependency
         raise ParameterError('tune needs optuna (pip install -r requirements.txt)') from error
-    optuna.logging.set_verbosity(optuna.logging.WARNING)
+    # its warnings are of trials that raised, which re-raise the error anyway (a Ctrl-C printed 30 lines of
+    # traceback before the command's one line: interrupted); tune says what each trial did itself
+    optuna.logging.set_verbosity(optuna.logging.ERROR)
     return optuna
 
 
@@ -169,10 +179,12 @@ class RefusedGains(Exception):
     """The controller refuses a point's gains for the nominal vehicle (e.g. too little authority)."""
 
 
-def fly_point(setup: TuneSetup, values: dict, after_seed=None) -> Score:
+def fly_point(setup: TuneSetup, values: dict, after_seed=None, label: str | None = None) -> Score:
     """Fly the gains of ``values`` on every tuning seed (one campaign each, via the campaign runner) and
     score all their flights. ``after_seed(index, score_so_far, rows_so_far)`` runs after each seed's
-    campaign (pruning raises from it). :class:`RefusedGains` if the controller refuses these gains."""
+    campaign (pruning raises from it). With ``label`` (e.g. 'trial 3') each campaign shows its flights as
+    they finish on stderr (the runner's progress bar, named by it and the seed). :class:`RefusedGains` if
+    the controller refuses these gains."""
     folder = trial_folder(setup, values)
     folder.mkdir(parents=True, exist_ok=True)
     gains_path = folder / 'gains.yaml'
@@ -181,13 +193,13 @@ def fly_point(setup: TuneSetup, values: dict, after_seed=None) -> Score:
         CampaignSetup.of(setup.spec, setup.options.vehicle_file, gains_path).check_controllers((setup.kind,))
     except ParameterError as error:
         raise RefusedGains(str(error)) from error
-    options = replace(setup.options, gains_file=str(gains_path), progress=False, report=False)
+    options = replace(setup.options, gains_file=str(gains_path), progress=label is not None, report=False)
     rows: list[dict] = []
     score = None
     for index, seed in enumerate(setup.seeds):
         campaign_dir = folder / f'seed-{seed}'
         run_campaign(replace(setup.spec, seed=seed), campaign_dir,
-                     replace(options, resume=holds_campaign(campaign_dir)))
+                     replace(options, resume=holds_campaign(campaign_dir), progress_label=f'{label} seed {seed}'))
         rows += read_flights(campaign_dir / FLIGHTS_FILE)
         score = objective(rows, setup.spec.max_error_m)
         if after_seed is not None:
@@ -195,8 +207,10 @@ def fly_point(setup: TuneSetup, values: dict, after_seed=None) -> Score:
     return score
 
 
-def make_objective(setup: TuneSetup):
-    """The function Optuna minimises: suggest a point, fly it, prune a hopeless one after a seed."""
+def make_objective(setup: TuneSetup, say=None):
+    """The function Optuna minimises: suggest a point, fly it, prune a hopeless one after a seed. With ``say``
+    (a function of a line of text), it says when a trial starts, shows each seed's flights as they finish
+    and says each seed's score."""
     optuna = _optuna()
     dimensions = search_space(setup.kind)
     total_flights = setup.spec.flights * len(setup.seeds)
@@ -204,10 +218,18 @@ def make_objective(setup: TuneSetup):
     def run(trial) -> float:
         values = {d.name: trial.suggest_float(d.name, d.low, d.high, log=d.log) for d in dimensions}
         starting = bool(trial.user_attrs.get('starting_gains'))
+        name = f'tune {setup.kind}: trial {trial.number}'
+        if say is not None:
+            say(f'{name}{" (the starting gains)" if starting else ""}: {len(setup.seeds)} seed(s) x '
+                f'{setup.spec.flights} flights')
 
         def after_seed(index: int, score: Score, rows: list[dict]) -> None:
             trial.set_user_attr('seeds_flown', index + 1)
             _record(trial, score)
+            if say is not None:
+                say(f'{name}: seed {setup.seeds[index]} ({index + 1}/{len(setup.seeds)}) flown: '
+                    f'{score.finished}/{score.flights} finished so far, objective so far '
+                    f'{score.objective_m * 100:.3f} cm')
             if starting or index == len(setup.seeds) - 1:
                 return
             if cannot_reach_required_share(score.flights - score.finished, total_flights):
@@ -220,7 +242,8 @@ def make_objective(setup: TuneSetup):
                 raise optuna.TrialPruned()
 
         try:
-            return fly_point(setup, values, after_seed).objective_m
+            label = None if say is None else f'trial {trial.number}'
+            return fly_point(setup, values, after_seed, label).objective_m
         except RefusedGains as error:     # scored as if every flight failed
             trial.set_user_attr('refused', str(error))
             return 2.0 * setup.spec.max_error_m
@@ -284,6 +307,16 @@ def write_gains(study, setup: TuneSetup) -> Path:
     return path
 
 
+def make_out_dir(out_dir: Path) -> None:
+    """Create ``out_dir`` (or keep it); ParameterError naming --out if it is a file or cannot be created."""
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ParameterError(f'--out: {out_dir} exists and is not a folder; choose another --out')
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as error:
+        raise ParameterError(f'--out: cannot create {out_dir}: {error.strerror}') from error
+
+
 @dataclass(frozen=True)
 class TuneOutcome:
     best_trial: int
@@ -300,7 +333,7 @@ def tune(setup: TuneSetup, progress: bool = True) -> TuneOutcome:
     optuna = _optuna()
     say = (lambda text: print(text, file=sys.stderr, flush=True)) if progress else (lambda text: None)
     values_in(setup.starting_gains(), setup.kind)     # the starting point lies in the space
-    setup.out_dir.mkdir(parents=True, exist_ok=True)
+    make_out_dir(setup.out_dir)
     with FileLock(setup.out_dir / LOCK_FILE,
                   lambda holder: f'--out: another tune is writing {setup.out_dir} (process {holder})'):
         study = open_study(setup)
@@ -326,7 +359,8 @@ def tune(setup: TuneSetup, progress: bool = True) -> TuneOutcome:
 
         remaining = max(0, setup.trials - done)
         if remaining:
-            study.optimize(make_objective(setup), n_trials=remaining, callbacks=[report])
+            study.optimize(make_objective(setup, say if progress else None), n_trials=remaining,
+                           callbacks=[report])
         starting = [t for t in study.get_trials(deepcopy=False) if t.user_attrs.get('starting_gains')
                     and t.state == optuna.trial.TrialState.COMPLETE]
         table = write_trials_table(study, setup)
