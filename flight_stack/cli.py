@@ -452,6 +452,9 @@ def run(argv: list[str]) -> int:
     if argv[:1] == ['list']:
         from flight_stack.listing import main as list_main
         return list_main(argv[1:])
+    if argv[:1] == ['study']:
+        from flight_stack.studies.cli import main as study_main
+        return study_main(argv[1:])
     args = parse_args(argv)
     if not args.quiet:
         print('planning the flight', flush=True)

@@ -409,19 +409,16 @@ def test_invalid_baseline_gains_are_named(kind, section, key, value):
 
 def test_the_untuned_baseline_gains_are_the_documented_derivation():
     """The untuned set's pid, smc_integral and se3 sections (the packaged ones before issue 26's tuning,
-    `--gains untuned`) are what bench/baseline_gains.py derives (docs/BASELINES.md) from its NNIT2FSMC gains,
+    `--gains untuned`) are what the baseline-gains study derives (docs/BASELINES.md) from its NNIT2FSMC gains,
     the nominal vehicle and the example campaign, to the 4 significant digits written in the file."""
-    import importlib.util
     from pathlib import Path
 
     from flight_stack.campaign.spec import load_spec
+    from flight_stack.studies import baseline_gains
     root = Path(__file__).resolve().parent.parent
-    spec = importlib.util.spec_from_file_location('baseline_gains', root / 'bench' / 'baseline_gains.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
     campaign = load_spec(root / 'campaigns' / 'paper-robustness.yaml')
     untuned = load_gains('untuned')
-    _, sections = module.derive(untuned, PAPER_VEHICLE, DISTURBANCES, campaign)
+    _, sections = baseline_gains.derive(untuned, PAPER_VEHICLE, DISTURBANCES, campaign)
     for section, per_axis in sections.items():
         for axis, values in per_axis.items():
             for key, value in values.items():

@@ -1,10 +1,7 @@
-"""bench/paper_tables.py on a tiny case: the tables have their shape, and their numbers are those of
-the same flights flown directly (fly_embedded and flight_metrics, without the script's wiring)."""
-import importlib.util
+"""``run_stack.py study paper-tables`` on a tiny case: the tables have their shape, and their numbers are those of
+the same flights flown directly (fly_embedded and flight_metrics, without the study's wiring)."""
 import itertools
 import math
-import sys
-from pathlib import Path
 
 import pytest
 
@@ -16,10 +13,8 @@ from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
 from quad_sim.perturbations.streams import flight_streams
 
-SCRIPT = Path(__file__).resolve().parent.parent / 'bench' / 'paper_tables.py'
-SPEC = importlib.util.spec_from_file_location('paper_tables', SCRIPT)
-paper_tables = sys.modules['paper_tables'] = importlib.util.module_from_spec(SPEC)   # (dataclasses look it up)
-SPEC.loader.exec_module(paper_tables)
+from flight_stack.studies import margins, paper_tables
+from flight_stack.studies.cli import main as study_main
 
 CONTROLLERS = ['nnit2fsmc', 'pid']
 DURATION = 3.0      # [s]: metrics after 1.5 s
@@ -29,7 +24,7 @@ NOISE_TITLE = ('Sensor noise (paper, 3 s; position 1 cm, velocity 2 cm/s, attitu
 
 
 def direct_metrics(kind, control_rate=1000.0, noisy=False):
-    """The paper flight of DURATION s, flown and measured without bench/paper_tables.py; ``noisy``: with
+    """The paper flight of DURATION s, flown and measured without the study; ``noisy``: with
     the sensor noise of campaigns/paper-robustness.yaml (no bias), streams of seed 1, flight 0."""
     params, disturbances = load_vehicle_file()
     gains = load_gains()
@@ -59,11 +54,11 @@ def parse_tables(text):
 
 @pytest.fixture(scope='module')
 def output(tmp_path_factory):
-    out = tmp_path_factory.mktemp('tables') / 'tables.md'
-    paper_tables.main(['--experiments', 'nominal,rate,noise', '--controllers', ','.join(CONTROLLERS),
+    out = tmp_path_factory.mktemp('tables')
+    assert study_main(['paper-tables', '--experiments', 'nominal,rate,noise', '--controllers', ','.join(CONTROLLERS),
                        '--duration', str(DURATION), '--rates', '1000,100', '--scenarios', 'paper,no-such-path',
-                       '--out', str(out)])
-    return out.read_text()
+                       '--out', str(out)]) == 0
+    return (out / 'paper-tables.md').read_text()
 
 
 @pytest.mark.slow
@@ -159,33 +154,23 @@ def test_the_absolute_yardstick_makes_a_large_error_unstable_whatever_the_flight
     assert paper_tables.instability(outcome(1.9, 1.0), loose) is None
 
 
-def _margins():
-    import importlib.util
-    bench = SCRIPT.parent
-    sys.path.insert(0, str(bench))
-    spec = importlib.util.spec_from_file_location('margins', bench / 'margins.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.mark.parametrize('kp, kd, tau', [(262.7, 32.83, 0.0), (12.5, 4.167, 0.0), (217.7, 27.21, 0.005)])
 def test_the_linearised_delay_margin_of_a_pd_double_integrator_is_the_closed_form(kp, kd, tau):
     """L(s) = (kd s + kp) e^(-s tau) / s^2: |L(j w_c)| = 1 at w_c^2 = (kd^2 + sqrt(kd^4 + 4 kp^2)) / 2, phase
     margin atan(kd w_c / kp) - w_c tau, delay margin atan(kd w_c / kp) / w_c - tau; the phase reaches -180
     degrees only through the delay, at w_180 with kd w_180 / kp = tan(w_180 tau)."""
     import cmath
-    margins = _margins().loop_margins(lambda s: (kd * s + kp) * cmath.exp(-s * tau) / (s * s))
+    found = margins.loop_margins(lambda s: (kd * s + kp) * cmath.exp(-s * tau) / (s * s))
     w_c = math.sqrt((kd ** 2 + math.sqrt(kd ** 4 + 4 * kp ** 2)) / 2)
-    assert margins['crossovers'] == [pytest.approx(w_c, rel=1e-9)]
-    assert margins['phase_margin'] == pytest.approx(math.atan(kd * w_c / kp) - w_c * tau, rel=1e-9)
-    assert margins['delay_margin'] == pytest.approx(math.atan(kd * w_c / kp) / w_c - tau, rel=1e-9)
+    assert found['crossovers'] == [pytest.approx(w_c, rel=1e-9)]
+    assert found['phase_margin'] == pytest.approx(math.atan(kd * w_c / kp) - w_c * tau, rel=1e-9)
+    assert found['delay_margin'] == pytest.approx(math.atan(kd * w_c / kp) / w_c - tau, rel=1e-9)
     if tau == 0.0:
-        assert margins['gain_margin'] == math.inf
+        assert found['gain_margin'] == math.inf
     else:
-        w = margins['phase_crossover']
+        w = found['phase_crossover']
         assert math.atan(kd * w / kp) == pytest.approx(w * tau, rel=1e-7)
-        assert margins['gain_margin'] == pytest.approx(w * w / math.hypot(kd * w, kp), rel=1e-7)
+        assert found['gain_margin'] == pytest.approx(w * w / math.hypot(kd * w, kp), rel=1e-7)
 
 
 def test_a_fractional_delay_holds_the_previous_command_for_its_physics_steps():

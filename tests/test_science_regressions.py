@@ -438,26 +438,14 @@ def test_a_campaign_spec_switches_the_measurement_stage_of_every_controller():
         parse_spec({**base, 'measurement_filters': 'yes'})
 
 
-def _bench(name):
-    import importlib.util
-    import sys
-    from pathlib import Path
-    bench = Path(__file__).resolve().parent.parent / 'bench'
-    sys.path.insert(0, str(bench))
-    spec = importlib.util.spec_from_file_location(name, bench / f'{name}.py')
-    module = sys.modules[name] = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.mark.parametrize('lower_height, lower_half_width, type_reducer', [
     (0.6, 0.35, 'km'), (0.6, 0.35, 'nie-tan'), (0.3, 0.2, 'km'), (0.9, 0.45, 'nie-tan'), (1.0, 0.5, 'km'),
     (0.7, 0.5, 'km'), (0.7, 0.5, 'nie-tan')])
 def test_the_matching_slope_is_the_fuzzy_terms_derivative_at_s_zero(lower_height, lower_half_width, type_reducer):
-    """bench/baseline_gains.py's small-signal slope, derived from the membership functions, against a
+    """The baseline-gains study's small-signal slope, derived from the membership functions, against a
     central difference of the IT2 term itself at S = 0 (input_scale 1.7, output_gain 2.3)."""
     from nnit2fsmc_controller.it2_fuzzy import IT2FuzzyCorrector
-    gains = _bench('baseline_gains')
+    from flight_stack.studies import baseline_gains as gains
     fuzzy = IT2FuzzyCorrector(1.7, 2.3, lower_height, lower_half_width, type_reducer)
     h = 1e-7
     numerical = -(fuzzy(h) - fuzzy(-h)) / (2 * h)
@@ -469,7 +457,7 @@ def test_the_untuned_baselines_are_matched_at_the_small_signal_slope():
     """The default IT2 shape (H 0.6, w 0.35, KM): slope 1 / (2 H) = 0.8333 at S = 0, 17 % below the
     least-squares slope over the universe, and the untuned pid's x derivative gain (the packaged one before
     issue 26's tuning) is that slope times fuzzy_gain / input_scale."""
-    gains = _bench('baseline_gains')
+    from flight_stack.studies import baseline_gains as gains
     packaged = load_gains('untuned')
     assert gains.fuzzy_slope(packaged) == pytest.approx(1.0 / 1.2, rel=1e-12)
     assert gains.least_squares_slope(packaged) == pytest.approx(1.0054, abs=1e-4)

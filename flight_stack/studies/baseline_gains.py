@@ -1,5 +1,6 @@
-#!/usr/bin/env python3
-"""Derive the gains of the fair baselines (pid, smc-integral, se3) from the NNIT2FSMC gains and a campaign.
+"""The baselines' derived gains and bound table of docs/BASELINES.md (and the matched gains of docs/PAPER.md 4.8.3).
+
+Derive the gains of the fair baselines (pid, smc-integral, se3) from the NNIT2FSMC gains and a campaign.
 
 The procedure of docs/BASELINES.md, written out so that it can be rerun after a change of the
 NNIT2FSMC gains, of the vehicle or of the campaign:
@@ -26,34 +27,33 @@ NNIT2FSMC gains, of the vehicle or of the campaign:
    ki * integral_limit = switching_gain + gain_uncertainty * |u_eq at hover|.
 5. se3: the same kp, kd, ki (multiplied by m or by Ix, Iy, Iz in the law) and clamps.
 
-    .venv/bin/python bench/baseline_gains.py [--gains FILE] [--vehicle FILE] [--campaign SPEC]
-        [--matching slope|least-squares|rmse|chattering] [--out GAINS_FILE]
+    run_stack.py study baseline-gains --out DIR [--gains FILE] [--vehicle FILE] [--campaign SPEC]
+        [--matching slope|least-squares|rmse|chattering]
 
-prints the slopes, the bound table and the three YAML sections of controller.yaml (``--out``: a
-whole gains file with them, for ``bench/paper_tables.py --gains``).
+prints the slopes, the bound table and the three YAML sections of controller.yaml, writes them to
+DIR/baseline-gains.md, and a whole gains file with those sections to DIR/gains.yaml (for
+``run_stack.py study paper-tables --gains DIR/gains.yaml``).
 """
 from __future__ import annotations
 
 import argparse
 import copy
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))     # paper_tables, for the rmse and chattering matchings
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-from flight_stack.campaign.spec import load_spec  # noqa: E402
-from nnit2fsmc_controller.controller import AXES  # noqa: E402
-from nnit2fsmc_controller.factory import load_gains  # noqa: E402
-from nnit2fsmc_controller.it2_fuzzy import IT2FuzzyCorrector  # noqa: E402
-from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
-from quad_sim.perturbations.wind import DEFAULT_ALTITUDE, low_altitude_scales  # noqa: E402
+from flight_stack.campaign.spec import load_spec
+from nnit2fsmc_controller.controller import AXES
+from nnit2fsmc_controller.factory import load_gains
+from nnit2fsmc_controller.it2_fuzzy import IT2FuzzyCorrector
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from quad_sim.perturbations.wind import DEFAULT_ALTITUDE, low_altitude_scales
 
-ROOT = Path(__file__).resolve().parent.parent
+from .common import add_out, progress, study_name, write_table
+
+STUDY = study_name(__name__)
 #: [m/s] largest horizontal and vertical speed of the paper helix (R w = 0.5, climb 0.1)
 HELIX_SPEED = (0.5, 0.1)
 GUST_SIGMAS = 2.0     #: the turbulence bound: mean + 2 sigma (95 % of the time per axis)
@@ -185,8 +185,8 @@ def with_sections(gains, sections) -> dict:
 
 def nominal_figure(kind: str, gains, metric: str) -> float:
     """The nominal paper flight's RMSE [cm] (``metric`` 'rmse') or total chattering [N/s] ('chattering')
-    of ``kind`` with ``gains`` (bench/paper_tables.py's flight)."""
-    import paper_tables
+    of ``kind`` with ``gains`` (the paper-tables study's flight)."""
+    from . import paper_tables
     outcome = paper_tables.fly(paper_tables.Flight(kind, 'paper'), gains)
     if outcome.failure is not None:
         return math.inf
@@ -224,54 +224,53 @@ MATCHINGS = ('slope', 'least-squares', 'rmse', 'chattering')
 MATCH_STEPS = 8      #: bisection steps of the rmse and chattering matchings: c to within a factor 256^(1/512) = 1.011
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('--gains', type=Path, default=None, help='NNIT2FSMC gains file (default: the packaged one)')
     parser.add_argument('--vehicle', type=Path, default=None, help='nominal vehicle file (default: the packaged one)')
-    parser.add_argument('--campaign', type=Path, default=ROOT / 'campaigns' / 'paper-robustness.yaml')
+    parser.add_argument('--campaign', type=Path, default=Path('campaigns/paper-robustness.yaml'))
     parser.add_argument('--matching', choices=MATCHINGS, default='slope',
                         help='slope: at S = 0 (default); least-squares: over the universe; rmse / chattering: '
                              'scaled until the nominal paper flight equals the NNIT2FSMC\'s (flies)')
-    parser.add_argument('--out', type=Path, default=None,
-                        help='also write a whole gains file (the --gains file with these baseline sections)')
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
     params, disturbances = load_vehicle_file(args.vehicle)
     gains, spec = load_gains(args.gains), load_spec(args.campaign)
     n = gains['nnit2fsmc']
     slope = fuzzy_slope(gains, args.matching)
-    print(f'IT2 small-signal slope at S = 0 (lower_height {n["lower_height"]}, lower_half_width '
-          f'{n["lower_half_width"]}, {n["type_reducer"]}): '
-          f'{small_signal_slope(n["lower_height"], n["lower_half_width"], n["type_reducer"]):.4f} x fuzzy_gain / '
-          f'input_scale; least-squares slope over the universe: {least_squares_slope(gains):.4f}')
-    print(f'matching: {args.matching}, slope {slope:.4f}')
+    lines = [f'IT2 small-signal slope at S = 0 (lower_height {n["lower_height"]}, lower_half_width '
+             f'{n["lower_half_width"]}, {n["type_reducer"]}): '
+             f'{small_signal_slope(n["lower_height"], n["lower_half_width"], n["type_reducer"]):.4f} x fuzzy_gain / '
+             f'input_scale; least-squares slope over the universe: {least_squares_slope(gains):.4f}',
+             f'matching: {args.matching}, slope {slope:.4f}']
     scales = {kind: 1.0 for kind in SECTIONS}
     if args.matching in ('rmse', 'chattering'):
+        progress(STUDY, f'flying the nnit2fsmc nominal paper flight (the {args.matching} target)')
         target = nominal_figure('nnit2fsmc', gains, args.matching)
         unit = 'cm' if args.matching == 'rmse' else 'N/s'
-        print(f'target: nnit2fsmc nominal paper flight {args.matching} {target:.4g} {unit}')
+        lines.append(f'target: nnit2fsmc nominal paper flight {args.matching} {target:.4g} {unit}')
         for kind in SECTIONS:
+            progress(STUDY, f'{kind}: bisection on its scale c, {MATCH_STEPS + 1} nominal paper flights')
             scales[kind], reached = matched_scale(kind, gains, params, disturbances, spec, slope, args.matching,
                                                   target)
-            print(f'  {kind}: c = {scales[kind]:.4g} -> {args.matching} {reached:.4g} {unit}')
+            lines.append(f'  {kind}: c = {scales[kind]:.4g} -> {args.matching} {reached:.4g} {unit}')
     (r_min, r_max, delta, rows), sections = derive(gains, params, disturbances, spec, slope, scales)
-    print(f'gain ratio r = true/nominal in [{r_min:.4f}, {r_max:.4f}], gain_uncertainty = {delta:.4f}\n')
-    print('| axis | k [1/s] | kp | kd | ki | model error terms [N or N m] | F [q\'\' units] | switching_gain | '
-          'u_eq at hover | integral_limit |')
-    print('|---|---:|---:|---:|---:|---|---:|---:|---:|---:|')
+    lines += [f'gain ratio r = true/nominal in [{r_min:.4f}, {r_max:.4f}], gain_uncertainty = {delta:.4f}', '',
+              '| axis | k [1/s] | kp | kd | ki | model error terms [N or N m] | F [q\'\' units] | switching_gain | '
+              'u_eq at hover | integral_limit |',
+              '|---|---:|---:|---:|---:|---|---:|---:|---:|---:|']
     for axis, k, kp, kd, ki, terms, f, switching, hover, limit in rows:
         parts = ', '.join(f'{name} {value:.4g}' for name, value in terms.items())
-        print(f'| {axis} | {k:.4g} | {kp:.4g} | {kd:.4g} | {ki:.4g} | {parts} | {f:.4g} | {switching:.4g} | '
-              f'{hover:.4g} | {limit:.4g} |')
+        lines.append(f'| {axis} | {k:.4g} | {kp:.4g} | {kd:.4g} | {ki:.4g} | {parts} | {f:.4g} | {switching:.4g} | '
+                     f'{hover:.4g} | {limit:.4g} |')
     for section, per_axis in sections.items():
-        print(f'\n    {section}:\n      axes:')
+        lines += ['', f'    {section}:', '      axes:']
         for axis, values in per_axis.items():
             text = ', '.join(f'{key}: {yaml_float(value)}' for key, value in values.items())
-            print(f'        {axis + ":":6} {{{text}}}')
-    if args.out is not None:
-        args.out.write_text(yaml.safe_dump(with_sections(gains, sections), sort_keys=False))
-        print(f'\nwrote {args.out}')
+            lines.append(f'        {axis + ":":6} {{{text}}}')
+    write_table(STUDY, args.out, '\n'.join(lines))
+    gains_file = args.out / 'gains.yaml'
+    gains_file.write_text(yaml.safe_dump(with_sections(gains, sections), sort_keys=False))
+    progress(STUDY, f'wrote the gains file with these sections {gains_file}')
     return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

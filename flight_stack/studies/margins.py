@@ -1,15 +1,16 @@
-#!/usr/bin/env python3
-"""Stability margins of each controller: simulated (delay with and without motor lag, gain) and
+"""The stability-margin tables of docs/PAPER.md 4.8.4: simulated delay and gain margins, linearised axis loops.
+
+Stability margins of each controller: simulated (delay with and without motor lag, gain) and
 linearised (phase, delay and gain margin of each axis loop).
 
-    .venv/bin/python bench/margins.py                                  # nnit2fsmc, pid, se3, smc-integral
-    .venv/bin/python bench/margins.py --controllers pid --jobs 2 --duration 30 --out margins.md
-    .venv/bin/python bench/margins.py --linear-only
+    run_stack.py study margins --out DIR                   # nnit2fsmc, pid, se3, smc-integral
+    run_stack.py study margins --out DIR --controllers pid --jobs 2 --duration 30
+    run_stack.py study margins --out DIR --linear-only
 
 **Simulated** (embedded flights of the paper helix with its section IV disturbances, the nominal
 vehicle, the packaged gains, every controller through the same measurement stage; physics at
 4 kHz, so that a delay is resolved to 0.25 ms: whole control steps of the transport delay plus a
-fraction of a control step, bench/paper_tables.py ``FractionalDelaySimulator``):
+fraction of a control step, paper_tables.py ``FractionalDelaySimulator``):
 
 * delay margin without motor lag and with the example campaign's 30 ms motor lag: the smallest
   delay at which the flight is unstable, by bisection over 0..``--max-delay`` ms to 0.25 ms;
@@ -17,7 +18,7 @@ fraction of a control step, bench/paper_tables.py ``FractionalDelaySimulator``):
   of g at the plant input) at which the flight is unstable, by bisection on log g over [1, 16]
   (``GAIN_STEPS`` steps: g to within a factor 16^(1/2^(GAIN_STEPS+1)), 1.4 % at 6 steps).
 
-Criterion (bench/paper_tables.py ``instability``): the flight fails (non-finite, flipped, crashed,
+Criterion (paper_tables.py ``instability``): the flight fails (non-finite, flipped, crashed,
 1 m from the reference after settling), or its position RMSE exceeds the absolute yardstick of
 2 cm, or its attitude chattering TV(U2) + TV(U3) over the last 20 s (a limit cycle) or, for the delay
 margins only, its RMSE exceeds 10x the flight without the perturbation (with the same motor lag).
@@ -32,7 +33,7 @@ L(s) = C(s) P(s) in units of the subsystem's q''):
   are fed forward or small), the zero-order hold of the control period dt as half a period of
   delay, and the first-order motor lag tau_m (0 or 30 ms);
 * C(s): nnit2fsmc k (s F_v(s) + lambda) with k = (small-signal slope of the IT2 term at S = 0)
-  x fuzzy_gain / input_scale x b (bench/baseline_gains.py) and the network left out (it adapts
+  x fuzzy_gain / input_scale x b (baseline_gains.py) and the network left out (it adapts
   slowly: an added slow integral); pid and se3 kp + kd s F_v(s) + ki / s; smc-integral inside its
   boundary layer slope (s F_v(s) + lambda + integral_gain / s); F_v(s) = 1 / (1 + s / (2 pi f_v)),
   the velocity filter of the measurement stage on x, y, z (the complementary filter of position
@@ -51,17 +52,16 @@ import argparse
 import cmath
 import json
 import math
-import sys
 from dataclasses import replace
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-import paper_tables  # noqa: E402
-from baseline_gains import fuzzy_slope  # noqa: E402
-from nnit2fsmc_controller.controller import AXES  # noqa: E402
-from nnit2fsmc_controller.factory import control_period, load_gains  # noqa: E402
+from nnit2fsmc_controller.controller import AXES
+from nnit2fsmc_controller.factory import control_period, load_gains
+
+from . import paper_tables
+from .baseline_gains import fuzzy_slope
+from .common import add_out, names, run_all, study_name, write_table
+
+STUDY = study_name(__name__)
 
 CONTROLLERS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral')
 MOTOR_LAG = 0.030        #: [s] the example campaign's motor time constant
@@ -213,8 +213,8 @@ def simulated(task) -> dict:
     return delay_margins(kind, duration, max_delay, filters, with_gain=True)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('--controllers', default=','.join(CONTROLLERS))
     parser.add_argument('--duration', type=float, default=30.0, help='[s] each simulated flight (default 30)')
     parser.add_argument('--max-delay', type=float, default=MAX_DELAY,
@@ -222,17 +222,18 @@ def main(argv=None) -> int:
     parser.add_argument('--no-filters', action='store_true', help='also every figure with the measurement stage off')
     parser.add_argument('--linear-only', action='store_true', help='only the linearised margins (no flight)')
     parser.add_argument('--gain-only', action='store_true', help='of the simulated margins, only the gain margin')
-    parser.add_argument('--gains', help='gains file (default: the packaged one), e.g. one of '
-                                        'bench/baseline_gains.py --matching rmse --out FILE')
+    parser.add_argument('--gains', help='gains file (default: the packaged one), e.g. DIR/gains.yaml of '
+                                        'run_stack.py study baseline-gains --matching rmse --out DIR')
     parser.add_argument('--jobs', type=int, default=1)
-    parser.add_argument('--json', type=Path, help='also write the simulated figures as JSON')
-    parser.add_argument('--out', type=Path)
-    args = parser.parse_args(argv)
-    kinds = [k.strip() for k in args.controllers.split(',') if k.strip()]
+    parser.add_argument('--json', action='store_true', help='also write the simulated figures to DIR/margins.json')
+
+
+def run(args: argparse.Namespace) -> int:
+    kinds = names(args.controllers)
     gains = load_gains(args.gains)
     if args.gains:
         paper_tables.OVERRIDES['gains_file'] = args.gains
-    lines = ['### Linearised axis loops (near S = 0; bench/margins.py)', '',
+    lines = ['### Linearised axis loops (near S = 0; run_stack.py study margins)', '',
              '| controller | motor lag | delay margin [ms] (axis) | phase margin [deg] (axis) | '
              'gain margin (axis) | crossover [rad/s] (axis) |', '|---|---:|---:|---:|---:|---:|']
     for kind in kinds:
@@ -249,12 +250,14 @@ def main(argv=None) -> int:
         tasks = [(kind, args.duration, args.max_delay, True, args.gain_only) for kind in kinds]
         if args.no_filters:
             tasks += [(kind, args.duration, args.max_delay, False, args.gain_only) for kind in kinds]
-        results = dict(zip(tasks, paper_tables.run_all(simulated, tasks, max(1, args.jobs))))
-        if args.json is not None:
-            args.json.write_text(json.dumps({f'{t[0]}{"" if t[3] else " (no filters)"}': r
-                                             for t, r in results.items()}, indent=1, default=str))
+        results = dict(zip(tasks, run_all(simulated, tasks, max(1, args.jobs), STUDY,
+                                          lambda t: f'the margins of {t[0]}{"" if t[3] else " (no filters)"}')))
+        if args.json:
+            args.out.mkdir(parents=True, exist_ok=True)
+            (args.out / 'margins.json').write_text(json.dumps({f'{t[0]}{"" if t[3] else " (no filters)"}': r
+                                                              for t, r in results.items()}, indent=1, default=str))
         lines += ['', f'### Simulated margins (paper helix, {args.duration:g} s, physics {PHYSICS_RATE:g} Hz; '
-                  'bench/margins.py)', '',
+                  'run_stack.py study margins)', '',
                   '| controller | RMSE [cm] no lag | delay margin, no lag | RMSE [cm] 30 ms lag | '
                   'delay margin, 30 ms lag | gain margin |', '|---|---:|---:|---:|---:|---:|']
         for task, r in results.items():
@@ -267,12 +270,5 @@ def main(argv=None) -> int:
             no_lag, lag = r['delay_lag0'], r[f'delay_lag{MOTOR_LAG:g}']
             lines.append(f'| {name} | {no_lag["rmse_cm"]:.4g} | {no_lag["text"]} | {lag["rmse_cm"]:.4g} | '
                          f'{lag["text"]} | {gain_text} |')
-    text = '\n'.join(lines)
-    print(text)
-    if args.out is not None:
-        args.out.write_text(text + '\n')
+    write_table(STUDY, args.out, '\n'.join(lines))
     return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -1,11 +1,10 @@
-#!/usr/bin/env python3
-"""The Markdown tables of docs/PAPER.md: nominal flight, delay margin, control rate, sensor noise.
+"""The nominal, delay, control-rate and sensor-noise tables of docs/PAPER.md 4.1-4.5 and 4.8.1-4.8.3.
 
-    .venv/bin/python bench/paper_tables.py                       # every experiment, every controller
-    .venv/bin/python bench/paper_tables.py --experiments delay --controllers nnit2fsmc,pid
-    .venv/bin/python bench/paper_tables.py --duration 20 --jobs 2 --out tables.md
-    .venv/bin/python bench/paper_tables.py --no-filters          # every controller without the measurement stage
-    .venv/bin/python bench/paper_tables.py --gains FILE          # e.g. baselines matched at equal nominal RMSE
+    run_stack.py study paper-tables --out DIR                  # every experiment, every controller
+    run_stack.py study paper-tables --out DIR --experiments delay --controllers nnit2fsmc,pid
+    run_stack.py study paper-tables --out DIR --duration 20 --jobs 2
+    run_stack.py study paper-tables --out DIR --no-filters     # every controller without the measurement stage
+    run_stack.py study paper-tables --out DIR --gains FILE     # e.g. baselines matched at equal nominal RMSE
 
 Every flight is an embedded flight (:func:`flight_stack.embedded.fly_embedded`, the code path of
 ``run_stack.py --backend embedded``) of the nominal vehicle with the section IV disturbances, the
@@ -46,34 +45,32 @@ Experiments (``--experiments``, default all; ``--scenarios`` applies to each cho
   seed 1, flight 0): RMSE and total chattering, beside the sign-SMC's noise-free total chattering
   on the same scenario.
 
-``--jobs N`` flies N flights at a time in a process pool (default 1: in this process). Deterministic:
-the same command gives the same tables (seeded network and noise). The tables go to stdout, and
-with ``--out FILE`` to that file too.
+``--jobs N`` flies N flights at a time in a process pool (default 1: in this process), with a progress line per
+flight (a delay margin's bisection is one). Deterministic: the same command gives the same tables (seeded network
+and noise). The tables go to stdout and to DIR/paper-tables.md.
 """
 from __future__ import annotations
 
 import argparse
 import copy
 import math
-import multiprocessing
-import sys
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import dataclass, replace
-from pathlib import Path
+from dataclasses import dataclass, fields, replace
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-from flight_stack.closed_loop import FailureRules  # noqa: E402
-from flight_stack import embedded  # noqa: E402
-from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
-from nnit2fsmc_controller import factory  # noqa: E402
-from nnit2fsmc_controller import trajectory as trajectories  # noqa: E402
-from quad_msgs_bridge.review.metrics import default_settle_time, flight_metrics, has_fuzzy_term  # noqa: E402
-from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
-from quad_sim.perturbations.actuation import MotorLag, TransportDelay  # noqa: E402
-from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise  # noqa: E402
-from quad_sim.perturbations.streams import flight_streams  # noqa: E402
-from quad_sim.simulator import Simulator  # noqa: E402
+from flight_stack import embedded
+from flight_stack.closed_loop import FailureRules
+from flight_stack.embedded import Perturbations, fly_embedded
+from nnit2fsmc_controller import factory
+from nnit2fsmc_controller import trajectory as trajectories
+from quad_msgs_bridge.review.metrics import default_settle_time, flight_metrics, has_fuzzy_term
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_sim.perturbations.actuation import MotorLag, TransportDelay
+from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
+from quad_sim.perturbations.streams import flight_streams
+from quad_sim.simulator import Simulator
+
+from .common import add_out, names, run_all, study_name, write_table
+
+STUDY = study_name(__name__)
 
 EXPERIMENTS = ('nominal', 'delay', 'rate', 'noise')
 DEFAULT_SCENARIOS = {'nominal': ('paper',), 'delay': ('paper',), 'rate': ('paper',), 'noise': ('paper', 'lemniscate')}
@@ -106,6 +103,13 @@ class Flight:
     thrust_factor: float = 1.0         #: every rotor gives this times its command: a loop-gain change
     filters: bool = True               #: False: the measurement stage off (common.*_filter_hz 0) for every kind
     gains_file: str | None = None      #: a gains file instead of the packaged one
+
+    @property
+    def label(self) -> str:
+        """The controller and scenario, then every field that differs from the nominal flight (a progress line)."""
+        changed = [f'{field.name} {getattr(self, field.name)}' for field in fields(self)[2:]
+                   if getattr(self, field.name) != field.default]
+        return ', '.join([f'{self.controller} on {self.scenario}', *changed])
 
 
 @dataclass(frozen=True)
@@ -307,15 +311,6 @@ def _delay_margin_task(task):
     return delay_margin(*task)
 
 
-def run_all(function, tasks: list, jobs: int) -> list:
-    """``[function(t) for t in tasks]``, ``jobs`` at a time in worker processes when jobs > 1."""
-    if jobs <= 1 or len(tasks) <= 1:
-        return [function(task) for task in tasks]
-    method = 'fork' if 'fork' in multiprocessing.get_all_start_methods() else None
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context(method)) as pool:
-        return list(pool.map(function, tasks))
-
-
 # --- tables ------------------------------------------------------------------------------------------
 
 def number(value: float) -> str:
@@ -371,7 +366,7 @@ def delay_table(controllers, scenario, duration, flown, margins) -> list[str]:
          f'TV(U2) {ms}', 'TV(U3) [N/s] no delay', f'TV(U3) {ms}', f'note ({ms})'], rows) + [
         '', f'Delay margin: smallest delay (bisection over 0..{1e3 * MAX_DELAY:g} ms in control steps) at which the '
         f'flight fails, its RMSE exceeds {ABSOLUTE_RMSE_CM:g} cm, or TV(U2) + TV(U3) over its last {TAIL:g} s or its '
-        f'RMSE exceeds {INSTABILITY_FACTOR:g}x the no-delay value (bench/paper_tables.py); "not monotone": a flight flown here with a longer delay than '
+        f'RMSE exceeds {INSTABILITY_FACTOR:g}x the no-delay value (run_stack.py study paper-tables); "not monotone": a flight flown here with a longer delay than '
         'an unstable one was stable, so the bisection may have missed a smaller unstable delay. TV columns: '
         f'the last {TAIL:g} s of the flight (its settled part if that is shorter).']
 
@@ -426,11 +421,12 @@ def paper_tables(experiments, controllers, scenarios: dict, duration: float | No
                 plan.append((experiment, scenario))
     needed = list(dict.fromkeys(f for experiment, scenario in plan
                                 for f in flights_needed(experiment, controllers, scenario, duration, rates)))
-    flown = dict(zip(needed, run_all(fly, needed, jobs)))
+    flown = dict(zip(needed, run_all(fly, needed, jobs, STUDY, lambda flight: flight.label)))
     margin_tasks = [(Flight(kind, scenario, duration), flown[Flight(kind, scenario, duration)])
                     for experiment, scenario in plan if experiment == 'delay' for kind in controllers]
     margins = {(task[0].controller, task[0].scenario): margin
-               for task, margin in zip(margin_tasks, run_all(_delay_margin_task, margin_tasks, jobs))}
+               for task, margin in zip(margin_tasks, run_all(_delay_margin_task, margin_tasks, jobs, STUDY,
+                                                             lambda task: f'the delay margin of {task[0].label}'))}
     out = []
     for experiment, scenario in plan:
         if experiment == 'nominal':
@@ -449,12 +445,8 @@ def paper_tables(experiments, controllers, scenarios: dict, duration: float | No
     return out
 
 
-def names(text: str) -> list[str]:
-    return [name.strip() for name in text.split(',') if name.strip()]
-
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('--experiments', default=','.join(EXPERIMENTS), help=f'comma-separated of {", ".join(EXPERIMENTS)}')
     parser.add_argument('--controllers', help='comma-separated controller kinds (default: every kind)')
     parser.add_argument('--scenarios', help='comma-separated scenario names for every chosen experiment '
@@ -463,11 +455,12 @@ def main(argv=None) -> int:
     parser.add_argument('--rates', default=','.join(f'{r:g}' for r in DEFAULT_RATES), help='[Hz] control rates')
     parser.add_argument('--jobs', type=int, default=1, help='flights at a time (process pool; default 1)')
     parser.add_argument('--gains', help='gains file for every flight (default: the packaged one), e.g. one of '
-                                        'bench/baseline_gains.py --matching rmse --out FILE')
+                                        'run_stack.py study baseline-gains --matching rmse --out DIR')
     parser.add_argument('--no-filters', action='store_true',
                         help='every controller without its measurement stage (common.*_filter_hz 0)')
-    parser.add_argument('--out', type=Path, help='also write the tables to this file')
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
     OVERRIDES.clear()
     if args.gains:
         OVERRIDES['gains_file'] = args.gains
@@ -478,18 +471,12 @@ def main(argv=None) -> int:
     controllers = names(args.controllers) if args.controllers else list(factory.CONTROLLERS)
     unknown += [c for c in controllers if kind_of(c) not in factory.CONTROLLERS]
     if unknown:
-        parser.error(f'unknown experiment or controller: {", ".join(unknown)} '
-                     f'(experiments: {", ".join(EXPERIMENTS)}; controllers: {", ".join(factory.CONTROLLERS)})')
+        raise ParameterError(f'unknown experiment or controller: {", ".join(unknown)} '
+                             f'(experiments: {", ".join(EXPERIMENTS)}; controllers: {", ".join(factory.CONTROLLERS)})')
     if args.duration is not None and not args.duration > 0.0:
-        parser.error('--duration must be positive')
+        raise ParameterError('--duration must be positive')
     scenarios = {e: tuple(names(args.scenarios)) if args.scenarios else DEFAULT_SCENARIOS[e] for e in experiments}
     rates = [float(r) for r in names(args.rates)]
     text = '\n'.join(paper_tables(experiments, controllers, scenarios, args.duration, rates, max(1, args.jobs)))
-    print(text)
-    if args.out is not None:
-        args.out.write_text(text + '\n')
+    write_table(STUDY, args.out, text)
     return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

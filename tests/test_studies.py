@@ -1,0 +1,45 @@
+"""``run_stack.py study``: every module of flight_stack/studies/ is a study the command lists and runs, and an
+unknown name is refused with the list."""
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from flight_stack.studies import cli
+
+ROOT = Path(__file__).resolve().parent.parent
+STUDIES = sorted(path.stem.replace('_', '-') for path in (ROOT / 'flight_stack' / 'studies').glob('*.py')
+                 if path.stem not in ('__init__', *cli.HELPERS))
+
+
+def study(*argv):
+    return subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), 'study', *argv], capture_output=True,
+                          text=True, timeout=120)
+
+
+def test_the_list_names_every_study_module_with_its_table_and_doc():
+    listed = study('--list')
+    assert listed.returncode == 0, listed.stderr
+    rows = dict(line.split(None, 1) for line in listed.stdout.splitlines())
+    assert sorted(rows) == STUDIES
+    for name, description in rows.items():
+        assert 'table' in description and ('docs/' in description or 'README' in description), (name, description)
+
+
+def test_an_unknown_study_exits_2_with_the_list():
+    refused = study('no-such-study')
+    assert refused.returncode == 2 and refused.stdout == ''
+    assert "no study 'no-such-study'" in refused.stderr
+    assert all(name in refused.stderr for name in STUDIES)
+
+
+#: the subcommand that flies, of a study that has several
+FLYING = {'scoreboard': ['run']}
+
+
+@pytest.mark.parametrize('name', STUDIES)
+def test_every_study_has_its_options_and_an_out_folder(name):
+    shown = study(name, *FLYING.get(name, []), '--help')
+    assert shown.returncode == 0, shown.stderr
+    assert f'run_stack.py study {name}' in shown.stdout and '--out DIR' in shown.stdout
