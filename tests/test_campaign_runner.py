@@ -397,14 +397,10 @@ def test_a_signal_stops_a_campaign_in_every_phase_and_resume_still_works(tmp_pat
 
 
 def test_the_held_out_table_reads_a_campaign_folder(reference_run):
-    """bench/heldout_table.py reads the columns the campaign writes (it once asked for a column the campaign
+    """The heldout study reads the columns the campaign writes (it once asked for a column the campaign
     had renamed): one row per controller with its flights, finished share and the chattering of both channels."""
-    sys.path.insert(0, str(ROOT / 'bench'))
-    try:
-        import heldout_table
-    finally:
-        sys.path.remove(str(ROOT / 'bench'))
-    lines = heldout_table.table([reference_run])
+    from flight_stack.studies import heldout
+    lines = heldout.table([reference_run])
     rows = {line.split('|')[1].strip(): [cell.strip() for cell in line.split('|')[2:-1]] for line in lines[2:]}
     assert set(rows) == {'nnit2fsmc', 'pid'}
     flights = rows_by_key(reference_run)

@@ -3,7 +3,6 @@ campaigns, the named gains sets, and the packaging of tuned points into one gain
 import csv
 import math
 import random
-import sys
 from pathlib import Path
 
 import distributed
@@ -19,13 +18,9 @@ from nnit2fsmc_controller.factory import (DEFAULT_CONTROLLER_FILE, PAPER_FAITHFU
 from nnit2fsmc_controller.search_spaces import SEARCH_SPACES, search_space, values_in, with_values
 from quad_msgs_bridge.vehicle_params import ParameterError
 
-ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / 'bench'))
-import heldout_table  # noqa: E402
-import paper_tables  # noqa: E402
-import scoreboard  # noqa: E402
+from flight_stack.studies import heldout, paper_tables, scoreboard
 
-sys.path.remove(str(ROOT / 'bench'))
+ROOT = Path(__file__).resolve().parent.parent
 
 
 # --- statistics on synthetic data ----------------------------------------------------------------------------
@@ -66,7 +61,7 @@ def test_the_quantile_interval_covers_the_true_quantile_of_synthetic_samples():
     assert quantile([1.0, math.inf, math.inf, math.inf], 0.5).value == math.inf   # on the failures
     few = quantile([1.0, 2.0, 3.0, 4.0, 5.0], 0.5)
     assert math.isnan(few.low) and math.isnan(few.high)                 # 5 values bound no 95 % interval
-    assert heldout_table.cm(few.high) == 'none (too few flights)' and heldout_table.cm(math.inf) == 'failed'
+    assert heldout.cm(few.high) == 'none (too few flights)' and heldout.cm(math.inf) == 'failed'
 
 
 def rows(rmse_cm, finished=None, chattering=1.0):
@@ -103,7 +98,7 @@ def test_the_median_paired_difference_interval_on_a_synthetic_shift():
 
 
 def test_the_10_cm_threshold_is_strict_and_a_failure_is_never_under_it():
-    record = heldout_table.kind_record('c', 1, rows([9.99, 10.0, 3.0, 3.0], [True, True, True, False]))
+    record = heldout.kind_record('c', 1, rows([9.99, 10.0, 3.0, 3.0], [True, True, True, False]))
     assert record['under_10cm'] == 2 and record['finished'] == 3 and record['flights'] == 4
     assert record['under_10cm_wilson95'] == pytest.approx(wilson_interval(2, 4))
     assert record['rmse_p95_cm'] == math.inf                      # the failed flight is the worst
@@ -136,7 +131,7 @@ def test_each_kinds_own_campaign_flies_the_same_perturbed_flights(scheduler, tmp
         run_campaign(spec.overridden(controllers=[kind]), folders[kind],
                      RunOptions(scheduler=scheduler, progress=False, report=False,
                                 gains_file=None if gains is None else str(gains)))
-    by_seed = heldout_table.read_all(folders.values())
+    by_seed = heldout.read_all(folders.values())
     assert list(by_seed) == [5] and len(by_seed[5]) == 9
     first = {(row['controller'], row['flight']): row['mass_kg'] for row in by_seed[5]}
     assert all(first[('se3', k)] == first[('pid', k)] == first[('l1-se3', k)] for k in range(3))
@@ -144,15 +139,15 @@ def test_each_kinds_own_campaign_flies_the_same_perturbed_flights(scheduler, tmp
     other = tmp_path / 'other-seed'
     run_campaign(spec.overridden(controllers=['pid'], seed=6), other,
                  RunOptions(scheduler=scheduler, progress=False, report=False))
-    mixed = [dict(row, controller='se3') for row in heldout_table.read_all([other])[6]]
+    mixed = [dict(row, controller='se3') for row in heldout.read_all([other])[6]]
     with pytest.raises(ValueError, match='not the same perturbed flight'):
-        heldout_table.check_paired(by_seed[5] + mixed, 5)
+        heldout.check_paired(by_seed[5] + mixed, 5)
     longer = tmp_path / 'longer'
     run_campaign(spec.overridden(controllers=['pid'], duration=2.0, flights=1), longer,
                  RunOptions(scheduler=scheduler, progress=False, report=False))
     with pytest.raises(ValueError, match='spec differs'):
-        heldout_table.load([folders['pid'], longer])
-    lines = heldout_table.paired_lines(heldout_table.paired_records(by_seed, 'pid'))
+        heldout.load([folders['pid'], longer])
+    lines = heldout.paired_lines(heldout.paired_records(by_seed, 'pid'))
     assert [line.split('|')[1].strip() for line in lines[2:]] == ['se3', 'l1-se3']
 
 
@@ -168,7 +163,8 @@ def test_the_named_gains_sets_are_found_by_name_and_hold_every_gain(tmp_path, mo
         load_gains('nope')
     monkeypatch.chdir(tmp_path)
     (tmp_path / 'untuned').write_text(yaml.safe_dump({'common': {'control_rate': 500.0}}))
-    assert load_gains('untuned') == {'common': {'control_rate': 500.0}}          # a file of that name wins
+    assert flatten_gains(load_gains('untuned')) == {**flatten_gains(load_gains()),   # a file of that name wins,
+                                                    'common.control_rate': 500.0}  # merged over the packaged set
 
 
 def test_paper_faithful_is_the_untuned_set_with_the_paper_faithful_keys():

@@ -1,12 +1,13 @@
-#!/usr/bin/env python3
-"""The held-out campaign tables: one row per (controller, seed) and pooled, and the paired comparison of every
-controller against a reference (the NNIT2FSMC), from the campaign folders' flights.csv.
+"""The held-out campaign tables of docs/PAPER.md 4.8.6 and 4.8.8, from campaign folders (per kind, paired).
+
+One row per (controller, seed) and pooled, and the paired comparison of every controller against a reference
+(the NNIT2FSMC), from the campaign folders' flights.csv (it flies nothing: the campaigns are run_stack.py campaign's).
 
     python3 run_stack.py campaign campaigns/paper-robustness.yaml --seed 101 --flights 1000 \\
         --controllers nnit2fsmc,pid,se3,smc-integral --out out/heldout-101        # (and 102, 103)
-    .venv/bin/python bench/heldout_table.py out/heldout-101 out/heldout-102 out/heldout-103
-    .venv/bin/python bench/heldout_table.py --first 250 out/heldout-101     # flights 0..249 only
-    .venv/bin/python bench/heldout_table.py out/board/heldout/seed-*/*      # bench/scoreboard.py's folders
+    run_stack.py study heldout --out DIR out/heldout-101 out/heldout-102 out/heldout-103
+    run_stack.py study heldout --out DIR --first 250 out/heldout-101     # flights 0..249 only
+    run_stack.py study heldout --out DIR out/board/heldout/seed-*/*      # the scoreboard study's folders
 
 A folder may hold one controller or several; folders of one seed must fly the same perturbed flights
 (checked: the same spec apart from the controllers, and the same sampled vehicle and wind direction in
@@ -23,18 +24,20 @@ two-sided sign test's p-value. A folder still being flown gives the rows flown s
 """
 from __future__ import annotations
 
+import argparse
 import csv
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-from flight_stack.campaign.paired import paired, quantile, rmse_or_failed  # noqa: E402
-from flight_stack.campaign.results import read_flights, wilson_interval  # noqa: E402
-from flight_stack.campaign.sampling import SAMPLED_COLUMNS  # noqa: E402
+from flight_stack.campaign.paired import paired, quantile, rmse_or_failed
+from flight_stack.campaign.results import read_flights, wilson_interval
+from flight_stack.campaign.sampling import SAMPLED_COLUMNS
+
+from .common import add_out, progress, study_name, write_table
+
+STUDY = study_name(__name__)
 
 TARGET_RMSE_CM = 10.0
 ALL_SEEDS = 'all'
@@ -225,22 +228,20 @@ def table(folders, first: int | None = None) -> list[str]:
     return kind_lines(kind_records(read_all(folders, first)))
 
 
-def main(argv=None) -> int:
-    import argparse
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('folders', nargs='+', type=Path, help='campaign output folders')
     parser.add_argument('--first', type=int, default=None, help='only flights 0..N-1 of each folder')
     parser.add_argument('--reference', default=REFERENCE,
                         help=f'the paired comparison\'s reference (default {REFERENCE})')
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
+    progress(STUDY, f'reading {len(args.folders)} campaign folders')
     by_seed = read_all(args.folders, args.first)
     lines = kind_lines(kind_records(by_seed))
     pairs = paired_records(by_seed, args.reference)
     if pairs:
         lines += [''] + paired_lines(pairs)
-    print('\n'.join(lines))
+    write_table(STUDY, args.out, '\n'.join(lines))
     return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -1,29 +1,30 @@
-#!/usr/bin/env python3
-"""Issue 26's scoreboard: every kind with its tuned gains, on the held-out seeds, under every disturbance,
-with its nominal, noise and delay-margin figures (docs/SCOREBOARD.md).
+"""The scoreboard tables of docs/SCOREBOARD.md and the README: tuned kinds on held-out seeds, breaking points.
+
+Issue 26's scoreboard: every kind with its tuned gains, on the held-out seeds, under every disturbance, with
+its nominal, noise and delay-margin figures.
 
     # 1. the tuned points (run_stack.py tune ... --out ROOT/tune-KIND) become the packaged gains
-    .venv/bin/python bench/scoreboard.py package /work/scoreboard --trials-to docs/tuning
+    run_stack.py study scoreboard package /work/scoreboard --trials-to docs/tuning
     # 2. what the run will cost on this machine, measured (a few flights per kind), and the plan
-    .venv/bin/python bench/scoreboard.py plan
+    run_stack.py study scoreboard plan
     # 3. fly it (resumable: the same command again continues), write the tables and docs/SCOREBOARD.md
-    .venv/bin/python bench/scoreboard.py run --out out/scoreboard --markdown docs/SCOREBOARD.md
+    run_stack.py study scoreboard run --out out/scoreboard --markdown docs/SCOREBOARD.md
     # tables only, from what DIR holds
-    .venv/bin/python bench/scoreboard.py tables out/scoreboard --markdown docs/SCOREBOARD.md
+    run_stack.py study scoreboard tables out/scoreboard --markdown docs/SCOREBOARD.md
 
 ``run`` flies, with one gains file (default: the packaged one, which after ``package`` holds every kind's
 tuned gains; they do not collide, tests/test_tune_stress.py):
 
 * **held out**: ``SPEC`` (default campaigns/paper-robustness.yaml at ``--duration`` 30 s, the tuning's) on the
   seeds 101-103, ``--flights`` 1,000 each, one campaign folder per seed and kind
-  (``DIR/heldout/seed-S/KIND``; checked to fly the same perturbed flights: bench/heldout_table.py); the tables
-  of bench/heldout_table.py: per kind and the paired comparison against the NNIT2FSMC;
+  (``DIR/heldout/seed-S/KIND``; checked to fly the same perturbed flights: the heldout study); the tables
+  of the heldout study: per kind and the paired comparison against the NNIT2FSMC;
 * **breaking points**: ``run_stack.py stress SPEC --kind D`` for every disturbance D of
   flight_stack/campaign/stress.py and every kind, ``--stress-flights`` flights of ``--stress-duration`` s per try
   (``DIR/stress``);
-* **nominal and noise rows**: bench/paper_tables.py's nominal and noise experiments on the paper helix
+* **nominal and noise rows**: the paper-tables study's nominal and noise experiments on the paper helix
   (``--nominal-duration`` s);
-* **delay margins**: bench/margins.py ``delay_margins`` (ideal rotors and 30 ms motor lag, to 0.25 ms).
+* **delay margins**: the margins study's ``delay_margins`` (ideal rotors and 30 ms motor lag, to 0.25 ms).
 
 Writes ``DIR/heldout.csv``, ``DIR/paired.csv``, ``DIR/stress/breaking_points.csv`` (and its tries and plots),
 ``DIR/margins.csv``, ``DIR/nominal_noise.md`` and ``DIR/SCOREBOARD.md``; ``--markdown FILE`` also puts the
@@ -38,33 +39,33 @@ import hashlib
 import json
 import math
 import shutil
-import sys
 import tempfile
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-import heldout_table  # noqa: E402
-from flight_stack.campaign.results import FLIGHTS_FILE  # noqa: E402
-from flight_stack.campaign.runner import RunOptions, holds_campaign, run_campaign  # noqa: E402
-from flight_stack.campaign.spec import load_spec  # noqa: E402
-from flight_stack.campaign.stress import BREAKING_POINTS_FILE, KINDS as DISTURBANCES  # noqa: E402
-from nnit2fsmc_controller.factory import (DEFAULT_CONTROLLER_FILE, flatten_gains, load_gains,  # noqa: E402
-                                          locate_gains)
-from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values  # noqa: E402
-from quad_msgs_bridge.vehicle_params import ParameterError  # noqa: E402
+from flight_stack.campaign.results import FLIGHTS_FILE
+from flight_stack.campaign.runner import RunOptions, holds_campaign, run_campaign
+from flight_stack.campaign.spec import load_spec
+from flight_stack.campaign.stress import BREAKING_POINTS_FILE, KINDS as DISTURBANCES
+from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE, flatten_gains, load_gains, locate_gains
+from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values
+from quad_msgs_bridge.vehicle_params import ParameterError
+
+from . import heldout, margins, paper_tables
+from .common import add_out, names, progress, run_all, study_name
+
+STUDY = study_name(__name__)
 
 KINDS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral', 'l1-se3', 'indi')
 SPEC = 'campaigns/paper-robustness.yaml'
 HELDOUT_SEEDS = (101, 102, 103)
 SETTINGS_FILE = 'scoreboard.json'
 #: the header lines ``package`` writes (and replaces when run again): where each kind's tuned point came from
+#: (as the packaged gains file holds them since issue 26: a changed prefix would no longer replace those lines)
 PROVENANCE = '# Tuned (issue 26; bench/scoreboard.py package, docs/SCOREBOARD.md): '
-MARKERS = ('<!-- scoreboard:begin (bench/scoreboard.py writes this section) -->', '<!-- scoreboard:end -->')
+MARKERS = ('<!-- scoreboard:begin (run_stack.py study scoreboard writes this section) -->', '<!-- scoreboard:end -->')
 #: flights of a delay margin: the undelayed flight, the range's end, then bisection of 0.064 s to 0.25 ms
 #: (8 halvings), for ideal rotors and the 30 ms lag
 MARGIN_FLIGHTS = 2 * (2 + 8)
@@ -251,8 +252,8 @@ def fly_heldout(settings: Settings, out: Path) -> list[Path]:
             folder = heldout_folder(out, seed, kind)
             campaign = spec.overridden(flights=settings.flights, seed=seed, duration=settings.duration,
                                        controllers=[kind])
-            print(f'scoreboard: held out, seed {seed}, {kind}: {settings.flights} flights of {settings.duration:g} s '
-                  f'-> {folder}', file=sys.stderr, flush=True)
+            progress(STUDY, f'held out, seed {seed}, {kind}: {settings.flights} flights of {settings.duration:g} s '
+                            f'-> {folder}')
             run_campaign(campaign, folder, RunOptions(workers=settings.workers, gains_file=settings.gains_file(),
                                                       resume=holds_campaign(folder), report=False))
             folders.append(folder)
@@ -267,7 +268,7 @@ def fly_stress(settings: Settings, out: Path) -> None:
                 '--out', str(out / 'stress'), '--gains', settings.gains_file()]
         if settings.workers:
             argv += ['--workers', str(settings.workers)]
-        print('scoreboard: run_stack.py stress ' + ' '.join(argv), file=sys.stderr, flush=True)
+        progress(STUDY, 'run_stack.py stress ' + ' '.join(argv))
         if stress_main(argv) != 0:
             raise ParameterError(f'stress --kind {disturbance} failed (its message is above)')
 
@@ -278,10 +279,10 @@ def jobs(settings: Settings) -> int:
 
 
 def fly_nominal_noise(settings: Settings, out: Path) -> Path:
-    import paper_tables
     path = out / 'nominal_noise.md'
     if path.exists():
         return path
+    progress(STUDY, f'nominal and noise: {len(settings.kinds)} kinds x 2 flights of {settings.nominal_duration:g} s')
     paper_tables.OVERRIDES.clear()
     paper_tables.OVERRIDES['gains_file'] = settings.gains_file()
     lines = paper_tables.paper_tables(('nominal', 'noise'), list(settings.kinds),
@@ -292,22 +293,20 @@ def fly_nominal_noise(settings: Settings, out: Path) -> Path:
 
 
 def fly_margins(settings: Settings, out: Path) -> Path:
-    """``DIR/margins.json`` {kind: bench/margins.py delay_margins}, kind by kind (a kind done is kept)."""
-    import paper_tables
+    """``DIR/margins.json`` {kind: the margins study's delay_margins}, kind by kind (a kind done is kept)."""
     path = out / 'margins.json'
     done = json.loads(path.read_text()) if path.exists() else {}
     todo = [kind for kind in settings.kinds if kind not in done]
     paper_tables.OVERRIDES.clear()
     paper_tables.OVERRIDES['gains_file'] = settings.gains_file()
-    for kind, result in zip(todo, paper_tables.run_all(_margin_task, [(k, settings.margin_duration) for k in todo],
-                                                       jobs(settings))):
+    for kind, result in zip(todo, run_all(_margin_task, [(k, settings.margin_duration) for k in todo],
+                                          jobs(settings), STUDY, lambda task: f'the delay margins of {task[0]}')):
         done[kind] = result
         path.write_text(json.dumps(done, indent=1, default=str))
     return path
 
 
 def _margin_task(task) -> dict:
-    import margins
     kind, duration = task
     return margins.delay_margins(kind, duration, margins.MAX_DELAY)
 
@@ -341,7 +340,6 @@ def breaking_lines(path: Path, kinds, disturbances) -> list[str]:
 
 
 def margin_records(path: Path, kinds) -> list[dict]:
-    import margins
     if not path.exists():
         return []
     done = json.loads(path.read_text())
@@ -369,34 +367,34 @@ def tables(out: Path, settings: Settings) -> str:
     folders = [heldout_folder(out, seed, kind) for seed in s.seeds for kind in s.kinds
                if (heldout_folder(out, seed, kind) / FLIGHTS_FILE).exists()]
     parts = [f'Settings: spec `{s.spec}`, gains `{s.gains or "packaged"}` (digest {s.identity()["gains_digest"]}); '
-             f'kinds {", ".join(s.kinds)}. Made by `bench/scoreboard.py` (docs/SCOREBOARD.md says how).', '']
+             f'kinds {", ".join(s.kinds)}. Made by `run_stack.py study scoreboard` (docs/SCOREBOARD.md says how).', '']
     if folders:
-        by_seed = heldout_table.read_all(folders)
-        kinds = heldout_table.kind_records(by_seed)
-        pairs = heldout_table.paired_records(by_seed, s.kinds[0])
-        heldout_table.write_csv(kinds, out / 'heldout.csv')
-        heldout_table.write_csv(pairs, out / 'paired.csv')
-        flown = sorted({r['flights'] for r in kinds if r['seed'] != heldout_table.ALL_SEEDS})
+        by_seed = heldout.read_all(folders)
+        kinds = heldout.kind_records(by_seed)
+        pairs = heldout.paired_records(by_seed, s.kinds[0])
+        heldout.write_csv(kinds, out / 'heldout.csv')
+        heldout.write_csv(pairs, out / 'paired.csv')
+        flown = sorted({r['flights'] for r in kinds if r['seed'] != heldout.ALL_SEEDS})
         parts += [f'### Held out: seeds {", ".join(map(str, s.seeds))}, {"/".join(map(str, flown))} flights each of '
                   f'{s.duration:g} s', '',
                   'RMSE percentiles over all flights, a failed flight counted as worse than any (`failed` where a '
                   'percentile falls on failures); 95 % intervals: Wilson for shares, order statistics for '
-                  'percentiles (flight_stack/campaign/paired.py).', '', *heldout_table.kind_lines(kinds), '',
+                  'percentiles (flight_stack/campaign/paired.py).', '', *heldout.kind_lines(kinds), '',
                   f'### Paired against {s.kinds[0]} (flight k of seed s: the same perturbed vehicle, wind, noise)',
                   '',
                   'A finished flight beats a failed one; two failed flights tie. The median paired difference has '
-                  'the sign test\'s order-statistic interval.', '', *heldout_table.paired_lines(pairs), '']
+                  'the sign test\'s order-statistic interval.', '', *heldout.paired_lines(pairs), '']
     parts += [f'### Breaking points: the intensity where fewer than 90 % of {s.stress_flights} flights of '
               f'{s.stress_duration:g} s finish under 10 cm (`run_stack.py stress`)', '',
               *breaking_lines(out / 'stress' / BREAKING_POINTS_FILE, s.kinds, s.disturbances), '']
     nominal = out / 'nominal_noise.md'
     if nominal.exists():
-        parts += [f'### Nominal and noise (paper helix, {s.nominal_duration:g} s; bench/paper_tables.py)', '',
+        parts += [f'### Nominal and noise (paper helix, {s.nominal_duration:g} s; run_stack.py study paper-tables)', '',
                   nominal.read_text().strip(), '']
     margins = margin_records(out / 'margins.json', s.kinds)
     if margins:
-        heldout_table.write_csv(margins, out / 'margins.csv')
-        parts += [f'### Delay margins (paper helix, {s.margin_duration:g} s, to 0.25 ms; bench/margins.py)', '',
+        heldout.write_csv(margins, out / 'margins.csv')
+        parts += [f'### Delay margins (paper helix, {s.margin_duration:g} s, to 0.25 ms; run_stack.py study margins)', '',
                   *margin_lines(margins), '']
     text = '\n'.join(parts)
     (out / 'SCOREBOARD.md').write_text(text + '\n')
@@ -448,17 +446,18 @@ def measure(settings: Settings, flights: int = 8) -> dict[str, float]:
         for kind in settings.kinds:
             options = RunOptions(workers=settings.workers, gains_file=settings.gains_file(), progress=False,
                                  report=False)
+            progress(STUDY, f'plan: {kind}: a flight that compiles or loads its kernels')
             run_campaign(spec.overridden(flights=1, seed=0, duration=min(settings.duration, 6.0), controllers=[kind]),
                          Path(folder) / f'warm-{kind}', options)
             walls = []
             for count in (2, flights):
+                progress(STUDY, f'plan: {kind}: timing a campaign of {count} flights of {settings.duration:g} s')
                 start = time.perf_counter()
                 run_campaign(spec.overridden(flights=count, seed=0, duration=settings.duration, controllers=[kind]),
                              Path(folder) / f'{kind}-{count}', options)
                 walls.append(time.perf_counter() - start)
             cost[kind] = max(walls[1] - walls[0], 0.0) / (flights - 2)
-            print(f'scoreboard plan: {kind}: {cost[kind]:.3f} s wall per {settings.duration:g} s flight (measured)',
-                  file=sys.stderr, flush=True)
+            progress(STUDY, f'plan: {kind}: {cost[kind]:.3f} s wall per {settings.duration:g} s flight (measured)')
     return cost
 
 
@@ -468,16 +467,15 @@ def costs(settings: Settings, tune_root: Path | None, flights: int) -> dict[str,
     known = {kind: tuning_cost(tune_root, kind, settings.duration) for kind in settings.kinds} if tune_root else {}
     known = {kind: cost for kind, cost in known.items() if cost is not None}
     for kind, cost in known.items():
-        print(f'scoreboard plan: {kind}: {cost:.3f} s wall per {settings.duration:g} s flight (its tuning\'s trials)',
-              file=sys.stderr)
+        progress(STUDY, f'plan: {kind}: {cost:.3f} s wall per {settings.duration:g} s flight (its tuning\'s trials)')
     missing = tuple(kind for kind in settings.kinds if kind not in known)
     if missing:
         known.update(measure(replace(settings, kinds=missing), flights))
     return {kind: known[kind] for kind in settings.kinds}
 
 
-#: wall seconds per simulated second of one embedded flight (bench/paper_tables.py, one process) at 4 kHz and
-#: 1 kHz physics: bench/conditions_table.py's run of 2026-12-04 (6 kinds: 24 flights of 20 s at 1 kHz and about
+#: wall seconds per simulated second of one embedded flight (the paper-tables study, one process) at 4 kHz and
+#: 1 kHz physics: the conditions study's run of 2026-12-04 (6 kinds: 24 flights of 20 s at 1 kHz and about
 #: 120 delay-margin flights of 30 s at 4 kHz in 11 min on one shared core)
 EMBEDDED_4KHZ_COST, EMBEDDED_1KHZ_COST = 0.15, 0.04
 #: [s] wall time a campaign costs beyond its flights (workers start, kernels load, files): a stress try of 4
@@ -514,22 +512,18 @@ def plan(settings: Settings, cost: dict[str, float]) -> list[str]:
 
 # --- the command --------------------------------------------------------------------------------------------
 
-def names(text: str) -> tuple[str, ...]:
-    return tuple(part.strip() for part in text.split(',') if part.strip())
-
-
 def settings_of(args) -> Settings:
     unknown = [d for d in names(args.disturbances) if d not in DISTURBANCES]
     if unknown:
         raise ParameterError(f'--disturbances: unknown {", ".join(unknown)} (of {", ".join(DISTURBANCES)})')
-    kinds = names(args.kinds)
+    kinds = tuple(names(args.kinds))
     if not kinds:
         raise ParameterError('--kinds: give at least one controller kind (the first is the paired reference)')
     for name, value in (('--flights', args.flights), ('--stress-flights', args.stress_flights)):
         if value < 1:
             raise ParameterError(f'{name}: {value} must be a whole number >= 1')
     settings = Settings(args.spec, args.gains, kinds, tuple(int(s) for s in names(args.seeds)), args.flights,
-                        args.duration, names(args.disturbances), args.stress_flights, args.stress_duration,
+                        args.duration, tuple(names(args.disturbances)), args.stress_flights, args.stress_duration,
                         args.nominal_duration, args.margin_duration, args.workers)
     load_gains(settings.gains)          # a named set or a file: refused here, before anything flies
     return settings
@@ -556,9 +550,7 @@ def _run_options(parser: argparse.ArgumentParser) -> None:
 PARTS = ('heldout', 'stress', 'nominal', 'margins')
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     commands = parser.add_subparsers(dest='command', required=True)
     p = commands.add_parser('package', help='each kind\'s best tuned point onto the packaged gains file')
     p.add_argument('root', type=Path, help='folder holding tune-KIND/trials-KIND.csv for each kind')
@@ -573,62 +565,59 @@ def main(argv=None) -> int:
     p.add_argument('--measure-flights', type=int, default=8,
                    help='flights per kind to time where no trials table says (default 8, >= 3)')
     p = commands.add_parser('run', help='fly everything missing in DIR and write the tables')
-    p.add_argument('--out', type=Path, required=True)
+    add_out(p)
     _run_options(p)
     p.add_argument('--skip', default='', help=f'parts left out this time: {",".join(PARTS)}')
     p.add_argument('--markdown', type=Path, default=None, help='also write the tables into this file\'s section')
     p = commands.add_parser('tables', help='the tables from what DIR holds')
-    p.add_argument('out', type=Path)
-    p.add_argument('--markdown', type=Path, default=None)
-    args = parser.parse_args(argv)
-    try:
-        if args.command == 'package':
-            for line in package(args.root, names(args.kinds), args.into, args.trials_to):
-                print(line)
-            print(f'wrote {args.into}')
-            return 0
-        if args.command == 'tables':
-            stored = json.loads((args.out / SETTINGS_FILE).read_text())
-            settings = Settings(**{k: tuple(v) if isinstance(v, list) else v for k, v in stored.items()
-                                   if k in Settings.__dataclass_fields__})
-            text = tables(args.out, settings)
-            if args.markdown:
-                write_section(args.markdown, text)
-            print(text)
-            return 0
+    add_out(p)
+    p.add_argument('--markdown', type=Path, default=None, help='also write the tables into this file\'s section')
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.command == 'package':
+        for line in package(args.root, names(args.kinds), args.into, args.trials_to):
+            print(line)
+        progress(STUDY, f'wrote the gains file {args.into}')
+        return 0
+    if args.command == 'plan':
+        if args.measure_flights < 3:
+            raise ParameterError(f'--measure-flights: {args.measure_flights} must be >= 3')
         settings = settings_of(args)
-        if args.command == 'plan':
-            if args.measure_flights < 3:
-                raise ParameterError(f'--measure-flights: {args.measure_flights} must be >= 3')
-            print('\n'.join(plan(settings, costs(settings, args.tune_root, args.measure_flights))))
-            return 0
-        skip = set(names(args.skip))
-        if skip - set(PARTS):
-            raise ParameterError(f'--skip: unknown {", ".join(sorted(skip - set(PARTS)))} (parts: {", ".join(PARTS)})')
-        args.out.mkdir(parents=True, exist_ok=True)
-        identity = settings.identity()
-        stored_path = args.out / SETTINGS_FILE
-        if stored_path.exists() and json.loads(stored_path.read_text()) != identity:
-            raise ParameterError(f'--out: {args.out} holds a scoreboard of other settings or gains '
-                                 f'({stored_path}); use another --out')
-        stored_path.write_text(json.dumps(identity, indent=1))
-        if 'heldout' not in skip:
-            fly_heldout(settings, args.out)
-        if 'stress' not in skip:
-            fly_stress(settings, args.out)
-        if 'nominal' not in skip:
-            fly_nominal_noise(settings, args.out)
-        if 'margins' not in skip:
-            fly_margins(settings, args.out)
-        text = tables(args.out, settings)
-        if args.markdown:
-            write_section(args.markdown, text)
-        print(text)
-    except (ParameterError, ValueError) as error:
-        print(f'error: {error}', file=sys.stderr)
-        return 2
+        print('\n'.join(plan(settings, costs(settings, args.tune_root, args.measure_flights))))
+        return 0
+    if args.command == 'tables':
+        stored = json.loads((args.out / SETTINGS_FILE).read_text())
+        settings = Settings(**{k: tuple(v) if isinstance(v, list) else v for k, v in stored.items()
+                               if k in Settings.__dataclass_fields__})
+    else:
+        settings = settings_of(args)
+        fly_all(settings, args.out, set(names(args.skip)))
+    text = tables(args.out, settings)
+    print(text)
+    progress(STUDY, f'wrote the markdown tables {args.out / "SCOREBOARD.md"}')
+    if args.markdown:
+        write_section(args.markdown, text)
+        progress(STUDY, f'wrote them into the generated section of {args.markdown}')
     return 0
 
 
-if __name__ == '__main__':
-    sys.exit(main())
+def fly_all(settings: Settings, out: Path, skip: set[str]) -> None:
+    """Fly every part not in ``skip`` that ``out`` lacks (refused if ``out`` holds a run of other settings)."""
+    if skip - set(PARTS):
+        raise ParameterError(f'--skip: unknown {", ".join(sorted(skip - set(PARTS)))} (parts: {", ".join(PARTS)})')
+    out.mkdir(parents=True, exist_ok=True)
+    identity = settings.identity()
+    stored_path = out / SETTINGS_FILE
+    if stored_path.exists() and json.loads(stored_path.read_text()) != identity:
+        raise ParameterError(f'--out: {out} holds a scoreboard of other settings or gains '
+                             f'({stored_path}); use another --out')
+    stored_path.write_text(json.dumps(identity, indent=1))
+    if 'heldout' not in skip:
+        fly_heldout(settings, out)
+    if 'stress' not in skip:
+        fly_stress(settings, out)
+    if 'nominal' not in skip:
+        fly_nominal_noise(settings, out)
+    if 'margins' not in skip:
+        fly_margins(settings, out)
