@@ -279,7 +279,7 @@ def test_tune_refuses_an_out_that_is_a_file_in_one_line(tmp_path, capsys):
     spec.write_text(yaml.safe_dump(DOCUMENT))
     out.write_text('a file\n')
     assert run(['tune', str(spec), '--controller', 'pid', '--trials', '1', '--out', str(out)]) == 2
-    assert capsys.readouterr().err.splitlines()[-1] == f'error: --out: {out} exists and is not a folder; choose another --out'
+    assert capsys.readouterr().err == f'error: --out: {out} exists and is not a folder; choose another --out\n'
     assert out.read_text() == 'a file\n'
 
 

@@ -96,6 +96,8 @@ class TuneSetup:
         if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SAMPLER_SEED:
             raise ParameterError(f'--sampler-seed: {seed!r} is outside the valid range [0, {MAX_SAMPLER_SEED}] '
                                  '(a whole number)')
+        if self.out_dir.exists() and not self.out_dir.is_dir():
+            raise ParameterError(f'--out: {self.out_dir} exists and is not a folder; choose another --out')
 
     def identity(self) -> dict:
         """What makes two runs the same study (kept in the study; a resume must match it)."""
@@ -308,9 +310,8 @@ def write_gains(study, setup: TuneSetup) -> Path:
 
 
 def make_out_dir(out_dir: Path) -> None:
-    """Create ``out_dir`` (or keep it); ParameterError naming --out if it is a file or cannot be created."""
-    if out_dir.exists() and not out_dir.is_dir():
-        raise ParameterError(f'--out: {out_dir} exists and is not a folder; choose another --out')
+    """Create ``out_dir`` (or keep it); ParameterError naming --out if it cannot be created (a file on its path,
+    no permission)."""
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as error:
