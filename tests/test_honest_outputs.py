@@ -63,7 +63,7 @@ def test_a_flight_that_fails_its_max_error_check_is_reviewed_as_failed(tmp_path,
         assert 'FAILED: max position error' in text and 'exceeds --max-error 0.0001 m' in text
         assert 'no failure recorded' not in text and 'OK: flew its whole duration' not in text
     # the bag says so too: reviewed again later, the flight is still failed
-    assert review_main([str(out / 'bag'), '--out', str(tmp_path / 'again')]) == 0
+    assert review_main([str(out / 'bag'), '--out', str(tmp_path / 'again')]) == 1     # it FAILED: review exits 1
     assert 'FAILED: max position error' in report_lines(tmp_path / 'again')[0]
     [reviewed] = json.loads((tmp_path / 'again' / 'review.json').read_text())
     assert reviewed['flight_ok'] is False and reviewed['ended_early'] is None
@@ -85,7 +85,7 @@ def test_a_truncated_bag_is_reviewed_as_ended_early_and_says_where(run_6s, tmp_p
     assert flight.ended_early
     assert flight.end_time < 5.0
     assert flight.ending == f'stopped (interrupted, or its bag was cut short) at {flight.end_time:.3f} s of 6 s'
-    assert review_main([str(bag), '--out', str(tmp_path / 'review')]) == 0
+    assert review_main([str(bag), '--out', str(tmp_path / 'review')]) == 1     # it FAILED: review exits 1
     for text in report_lines(tmp_path / 'review'):
         assert f'FAILED: the flight ended early: stopped (interrupted, or its bag was cut short) at ' \
                f'{flight.end_time:.3f} s of 6 s' in text
@@ -107,7 +107,7 @@ def test_an_interrupted_flight_is_reviewed_as_interrupted_and_says_where(tmp_pat
     flight = read_flight(staging / 'bag')
     assert flight.ended_early
     assert flight.ending == f'interrupted at {flight.end_time:.3f} s of 1e+06 s'
-    assert review_main([str(staging / 'bag'), '--out', str(tmp_path / 'review')]) == 0
+    assert review_main([str(staging / 'bag'), '--out', str(tmp_path / 'review')]) == 1     # it FAILED: review exits 1
     for text in report_lines(tmp_path / 'review'):
         assert f'FAILED: the flight ended early: interrupted at {flight.end_time:.3f} s of 1e+06 s' in text
 
@@ -251,7 +251,8 @@ def test_a_vehicle_change_after_the_flights_end_is_refused(settings, message):
 
 
 def test_fly_names_an_unknown_controller_and_takes_a_gains_mapping():
-    with pytest.raises(ParameterError, match="^controller: 'pidd' is not one of nnit2fsmc"):
+    with pytest.raises(ParameterError, match="^controller: 'pidd' is not a known kind \\(did you mean pid\\?\\); known: "
+                                             "nnit2fsmc"):
         fly('pidd', 'hover', duration=1.0)
     from nnit2fsmc_controller.factory import load_gains
     gains = load_gains()
@@ -260,8 +261,10 @@ def test_fly_names_an_unknown_controller_and_takes_a_gains_mapping():
     flown = fly('nnit2fsmc', 'hover', duration=0.5, gains=gains, settle_time=0.2, seed=5)
     assert flown.summary['gains']['common']['lambda']['z'] == 3.0 and flown.summary['gains']['nnit2fsmc']['seed'] == 5
     assert json.dumps(gains, sort_keys=True) == given                # the caller's mapping is not changed
-    with pytest.raises(ParameterError, match=r'^gains \(the given mapping\): '):
-        fly('nnit2fsmc', 'hover', duration=0.5, gains={'common': {}})
+    with pytest.raises(ParameterError, match=r'^gains: common\.lambda\.zz: unknown gain \(did you mean common\.lambda\.z\?\)'):
+        fly('nnit2fsmc', 'hover', duration=0.5, gains={'common': {'lambda': {'zz': 3.0}}})
+    one_key = fly('nnit2fsmc', 'hover', duration=0.5, gains={'common': {'lambda': {'z': 3.0}}}, settle_time=0.2, seed=5)
+    assert one_key.summary['gains'] == flown.summary['gains']         # one key merged over the packaged set
 
 
 def test_leftovers_of_unfinished_runs_are_cleared_or_named(tmp_path):

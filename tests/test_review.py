@@ -194,6 +194,21 @@ def test_review_of_what_is_not_a_bag_says_what_it_is(kind, flights, tmp_path, ca
         assert 'expected a rosbag2 bag directory (holding metadata.yaml) or an MCAP file' in err
 
 
+def test_a_bag_folder_of_random_bytes_is_not_an_mcap_file_and_recover_is_not_suggested(tmp_path, capsys):
+    """Issue 35: a bag folder whose .mcap holds random bytes was 'not closed (killed?); run recover first'."""
+    bag = tmp_path / 'bag'
+    bag.mkdir()
+    (bag / 'rosbag.mcap').write_bytes(bytes(range(256)) * 16)
+    expected = (f'{bag / "rosbag.mcap"}: a binary file of 4096 bytes without the MCAP magic, not an MCAP file '
+                '(every MCAP file begins with its magic bytes, even a recording cut short: recover cannot make one of it)')
+    assert review_main([str(bag), '--out', str(tmp_path / 'out')]) == 2
+    assert capsys.readouterr().err == f'error: {expected}\n'
+    with pytest.raises(BagReadError) as raised:
+        flight_from_bag.read_flight(bag)
+    assert str(raised.value) == expected and 'killed' not in expected
+    assert not (tmp_path / 'out').exists()
+
+
 @pytest.mark.parametrize('kind', ['text file', 'renamed text file', 'empty mcap'])
 def test_recover_of_what_is_not_an_mcap_file_says_what_it_is_and_leaves_it(kind, flights, tmp_path, capsys):
     path, expected = not_a_bag(kind, tmp_path, flights)
@@ -249,7 +264,7 @@ def test_a_flight_that_failed_before_settling_is_recorded_as_failed_and_reviewed
     for source in (bag, mcap_file(bag)):          # the bag directory and its lone MCAP file
         custom = read_custom_data(source)
         assert custom['failure'] == result.failure and float(custom['failure_time_s']) == result.failure_time_s
-    assert review_main([str(bag), '--out', str(tmp_path / 'review'), '--no-plots']) == 0
+    assert review_main([str(bag), '--out', str(tmp_path / 'review'), '--no-plots']) == 1   # a FAILED flight (issue 35)
     out = capsys.readouterr().out
     assert f'FAILED: the flight ended early: position error above max_error at {when} s' in out
     report = (tmp_path / 'review' / 'report.md').read_text()

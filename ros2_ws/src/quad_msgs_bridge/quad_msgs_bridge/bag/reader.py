@@ -58,13 +58,19 @@ def describe_file(path: Path) -> str:
 
 
 def check_bag_path(bag: Path) -> None:
-    """Raise BagReadError saying what ``bag`` is unless it is a rosbag2 bag directory or an MCAP file."""
+    """Raise BagReadError saying what ``bag`` is unless it is a rosbag2 bag directory or an MCAP file; the .mcap
+    files of a directory must begin with the MCAP magic bytes (a recording cut short still does)."""
     if not bag.exists():
         raise BagReadError(f'{bag}: no such file or directory; {EXPECTED_BAG}')
     if bag.is_dir():
-        if (bag / METADATA_FILE).is_file() or any(bag.glob('*.mcap')):
-            return
-        raise BagReadError(f'{bag}: a directory without {METADATA_FILE} or .mcap file, not a bag; {EXPECTED_BAG}')
+        if not ((bag / METADATA_FILE).is_file() or any(bag.glob('*.mcap'))):
+            raise BagReadError(f'{bag}: a directory without {METADATA_FILE} or .mcap file, not a bag; {EXPECTED_BAG}')
+        for path in sorted(bag.glob('*.mcap')):
+            description = describe_file(path)
+            if not description.startswith('an MCAP file'):
+                raise BagReadError(f'{path}: {description}, not an MCAP file (every MCAP file begins with its '
+                                   'magic bytes, even a recording cut short: recover cannot make one of it)')
+        return
     if bag.name == METADATA_FILE and (bag.parent / METADATA_FILE).is_file():
         raise BagReadError(f'{bag}: the metadata file of a bag, not the bag; give its directory: {bag.parent}')
     description = describe_file(bag)

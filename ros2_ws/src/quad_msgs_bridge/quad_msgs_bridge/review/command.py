@@ -8,6 +8,10 @@ report (report.html and report.md) that says what was flown and what each metric
 
 Run as `ros2 run quad_msgs_bridge review BAG`, `python3 run_stack.py review BAG` or, without ROS,
 `python3 -m quad_msgs_bridge.review BAG`.
+
+Exit status: 0 when every flight reviewed is OK, 1 when one of them FAILED (its result line and the
+report say why: docs/OUTPUTS.md) or a file could not be written, 2 when a path is not a readable bag or
+an option is invalid.
 """
 from __future__ import annotations
 
@@ -162,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f'note: {note}')
     print(f'report: {result.report}' + (f' ({len(result.plots)} plots in {result.plots[0].parent})'
                                          if result.plots else ''))
-    return 0
+    return 0 if all(metrics['flight_ok'] for metrics in result.metrics) else 1
 
 
 if __name__ == '__main__':
