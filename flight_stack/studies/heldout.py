@@ -151,20 +151,16 @@ def paired_records(by_seed: dict[int, list[dict]], reference: str = REFERENCE) -
     return out
 
 
-def cm(value: float) -> str:
+def cm(value: float, signed: bool = False) -> str:
+    """A table cell of ``value`` [cm]: two decimals (with its sign if ``signed``: a paired difference), or why
+    there is no number (too few flights for the interval, a failed flight)."""
     if math.isnan(value):
         return 'none (too few flights)'
+    if math.isinf(value) and signed:
+        return '+inf (it failed)' if value > 0 else '-inf (the reference failed)'
     if math.isinf(value):
         return 'failed' if value > 0 else '-inf'
-    return f'{value:.2f}'
-
-
-def signed_cm(value: float) -> str:
-    if math.isnan(value):
-        return 'none (too few flights)'
-    if math.isinf(value):
-        return '+inf (it failed)' if value > 0 else '-inf (the reference failed)'
-    return f'{value:+.2f}'
+    return f'{value:+.2f}' if signed else f'{value:.2f}'
 
 
 def kind_lines(records: list[dict]) -> list[str]:
@@ -194,7 +190,7 @@ def paired_lines(records: list[dict]) -> list[str]:
         low, high = r['median_difference_ci95_cm']
         lines.append(f'| {r["controller"]} | {r["seed"]} | {r["pairs"]} | {100 * r["controller_better_share"]:.1f} % | '
                      f'{100 * r["reference_better_share"]:.1f} % | {r["ties"]} | '
-                     f'{signed_cm(r["median_difference_cm"])} ({signed_cm(low)} - {signed_cm(high)}) | '
+                     f'{cm(r["median_difference_cm"], True)} ({cm(low, True)} - {cm(high, True)}) | '
                      f'{r["sign_test_p"]:.2g} |')
     return lines
 

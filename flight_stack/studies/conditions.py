@@ -1,10 +1,10 @@
-#!/usr/bin/env python3
-"""Issue 26's four conditions and the delay margins, for every kind from one gains file: the table of
-docs/ADAPTIVE_BASELINES.md ("What they fly").
+"""The four-conditions and delay-margin table of docs/ADAPTIVE_BASELINES.md ("What they fly"), every kind.
 
-    .venv/bin/python bench/conditions_table.py                                   # the six kinds, packaged gains
-    .venv/bin/python bench/conditions_table.py --gains untuned --jobs 2 --out conditions.md
-    .venv/bin/python bench/conditions_table.py --kinds l1-se3,indi --no-margins
+Issue 26's four conditions and the delay margins, for every kind from one gains file.
+
+    run_stack.py study conditions --out DIR                                 # the six kinds, packaged gains
+    run_stack.py study conditions --out DIR --gains untuned --jobs 2
+    run_stack.py study conditions --out DIR --kinds l1-se3,indi --no-margins
 
 **Conditions** (``flight_stack.fly``, the paper helix with its section IV disturbances, ``--duration`` s, the
 nominal vehicle model, one flight each): position RMSE / largest position error after the settling time
@@ -16,7 +16,7 @@ nominal vehicle model, one flight each): position RMSE / largest position error 
 * rotor loss: rotor 1 loses 30 % of its thrust at 10 s
   (``rotor_efficiency_loss={'at_s': 10.0, 'loss': [0.3, 0, 0, 0]}``).
 
-**Delay margins** (bench/margins.py ``delay_margins``: the paper helix, ``--margin-duration`` s, physics at
+**Delay margins** (the margins study's ``delay_margins``: the paper helix, ``--margin-duration`` s, physics at
 4 kHz, to 0.25 ms): the smallest transport delay at which the flight is unstable, with ideal rotors and
 with the example campaign's 30 ms motor lag.
 """
@@ -24,17 +24,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-import margins  # noqa: E402
-import paper_tables  # noqa: E402
-from flight_stack.api import fly  # noqa: E402
-from nnit2fsmc_controller.factory import CONTROLLERS  # noqa: E402
-from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
+from flight_stack.api import fly
+from nnit2fsmc_controller.factory import CONTROLLERS
+from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+
+from . import margins, paper_tables
+from .common import add_out, names, run_all, study_name, write_table
+
+STUDY = study_name(__name__)
 
 KINDS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral', 'l1-se3', 'indi')
 CONDITIONS = ('nominal', 'wind 6 m/s', 'mass +30 %', 'rotor 1 -30 % at 10 s')
@@ -77,13 +75,14 @@ def cell(result: dict) -> str:
 def conditions_table(kinds, duration: float, gains, jobs: int, margin_duration: float | None,
                      max_delay: float = margins.MAX_DELAY) -> list[str]:
     tasks = [(kind, condition, duration, gains) for kind in kinds for condition in CONDITIONS]
-    flown = dict(zip(tasks, paper_tables.run_all(fly_condition, tasks, jobs)))
+    flown = dict(zip(tasks, run_all(fly_condition, tasks, jobs, STUDY, lambda t: f'{t[0]}: {t[1]}')))
     margin_of = {}
     if margin_duration is not None:
         if gains is not None:
             paper_tables.OVERRIDES['gains_file'] = str(gains)
         margin_tasks = [(kind, margin_duration, max_delay) for kind in kinds]
-        margin_of = dict(zip(kinds, paper_tables.run_all(margin_task, margin_tasks, jobs)))
+        margin_of = dict(zip(kinds, run_all(margin_task, margin_tasks, jobs, STUDY,
+                                            lambda t: f'{t[0]}: its delay margins')))
     header = ['kind', *(f'{c}: RMSE / max [mm]' for c in CONDITIONS)]
     if margin_of:
         header += ['delay margin, ideal rotors', 'delay margin, 30 ms motor lag']
@@ -97,29 +96,23 @@ def conditions_table(kinds, duration: float, gains, jobs: int, margin_duration: 
     return lines
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('--kinds', default=','.join(KINDS), help='comma-separated controller kinds')
     parser.add_argument('--gains', default=None, help='gains file or named set (default: the packaged one)')
     parser.add_argument('--duration', type=float, default=20.0, help='[s] each condition\'s flight (default 20)')
     parser.add_argument('--margin-duration', type=float, default=30.0,
-                        help='[s] each delay-margin flight (default 30, as bench/margins.py)')
+                        help='[s] each delay-margin flight (default 30, as the margins study)')
     parser.add_argument('--no-margins', action='store_true', help='leave the delay margins out')
     parser.add_argument('--jobs', type=int, default=1, help='flights at a time (default 1)')
-    parser.add_argument('--out', type=Path, help='also write the table to this file')
-    args = parser.parse_args(argv)
-    kinds = [k.strip() for k in args.kinds.split(',') if k.strip()]
+
+
+def run(args: argparse.Namespace) -> int:
+    kinds = names(args.kinds)
     unknown = [k for k in kinds if k not in CONTROLLERS]
     if unknown:
-        parser.error(f'--kinds: unknown {", ".join(unknown)} (kinds: {", ".join(CONTROLLERS)})')
+        raise ParameterError(f'--kinds: unknown {", ".join(unknown)} (kinds: {", ".join(CONTROLLERS)})')
     lines = conditions_table(kinds, args.duration, args.gains, max(1, args.jobs),
                              None if args.no_margins else args.margin_duration)
-    text = '\n'.join(lines)
-    print(text)
-    if args.out is not None:
-        args.out.write_text(text + '\n')
+    write_table(STUDY, args.out, '\n'.join(lines))
     return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

@@ -1,7 +1,8 @@
-#!/usr/bin/env python3
-"""One-at-a-time ablation of every change the defaults make to the paper's controller (NNIT2FSMC).
+"""The ablation tables of docs/PAPER.md 4.8.7 and 4.8.8: each change of the NNIT2FSMC defaults, one at a time.
 
-    .venv/bin/python bench/ablation.py [--duration 60] [--campaign-flights 100] [--jobs 2] [--out ablation.md]
+One-at-a-time ablation of every change the defaults make to the paper's controller (NNIT2FSMC).
+
+    run_stack.py study ablation --out DIR [--duration 60] [--campaign-flights 100] [--jobs 2]
 
 The changes are the keys of ``factory.PAPER_FAITHFUL`` (docs/ADAPTIVE.md), grouped by what they do
 (:data:`CHANGES`). Two directions:
@@ -10,7 +11,7 @@ The changes are the keys of ``factory.PAPER_FAITHFUL`` (docs/ADAPTIVE.md), group
 * **added alone**: the paper-faithful configuration with one change set to its default.
 
 Per configuration: the nominal paper flight's RMSE [cm], the same with a 20 ms transport delay, with
-the example campaign's sensor noise (bench/paper_tables.py ``NOISE``), and with its 30 ms motor lag
+the example campaign's sensor noise (paper_tables.py ``NOISE``), and with its 30 ms motor lag
 (RMSE, or the failure), then a small example campaign (campaigns/paper-robustness.yaml,
 ``--campaign-flights`` flights of seed ``--campaign-seed``, a tuning seed: never a reported one):
 finished flights and median RMSE. Every flight reads through the measurement stage of its gains
@@ -21,22 +22,20 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
-import sys
 import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-import paper_tables  # noqa: E402
-from flight_stack.campaign.batch import BatchJob, fly_batch  # noqa: E402
-from flight_stack.campaign.spec import load_spec  # noqa: E402
-from nnit2fsmc_controller import factory  # noqa: E402
+from flight_stack.campaign.batch import BatchJob, fly_batch
+from flight_stack.campaign.spec import load_spec
+from nnit2fsmc_controller import factory
 
-ROOT = Path(__file__).resolve().parent.parent
+from . import paper_tables
+from .common import add_out, run_all, study_name, write_table
+
+STUDY = study_name(__name__)
 LEARNING = tuple(key for key in factory.PAPER_FAITHFUL if key.endswith('learning_rate'))
 WIDER = tuple(key for key in factory.PAPER_FAITHFUL if key.endswith(('input_scale', 'fuzzy_gain')))
 #: change -> the PAPER_FAITHFUL keys it sets
@@ -86,9 +85,10 @@ def single_flights(task) -> dict:
 
 
 def campaign(task) -> str:
-    """'finished / flights, median RMSE [cm]' of one configuration's small campaign."""
-    gains_file, flights, seed = task
-    spec = replace(load_spec(ROOT / 'campaigns' / 'paper-robustness.yaml'), seed=seed)
+    """'finished / flights, median RMSE [cm]' of one configuration's small campaign (name, gains file, flights,
+    seed): one batch of the campaign's batch path."""
+    _, gains_file, flights, seed = task
+    spec = replace(load_spec('campaigns/paper-robustness.yaml'), seed=seed)
     rows = fly_batch(BatchJob(spec, 'nnit2fsmc', tuple(range(flights)), gains_file=gains_file))   # one batch
     finished = [row for row in rows if not row['failure']]
     rmse = [100.0 * row['rmse_position_m'] for row in finished]
@@ -96,15 +96,16 @@ def campaign(task) -> str:
     return f'{len(finished)} / {flights}, {median:.3g}'
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('--duration', type=float, default=60.0, help='[s] the single flights (default 60)')
     parser.add_argument('--campaign-flights', type=int, default=100, help='0: no campaign column')
     parser.add_argument('--campaign-seed', type=int, default=2, help='a tuning seed (default 2)')
     parser.add_argument('--only', help='comma-separated configuration names (default: all)')
     parser.add_argument('--jobs', type=int, default=1)
-    parser.add_argument('--out', type=Path)
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
     configs = configurations()
     if args.only:
         configs = {name: configs[name.strip()] for name in args.only.split(',')}
@@ -113,23 +114,18 @@ def main(argv=None) -> int:
     for i, (name, flat) in enumerate(configs.items()):
         files[name] = str(folder / f'gains-{i}.yaml')
         Path(files[name]).write_text(yaml.safe_dump(factory.unflatten_gains(flat)))
-    singles = paper_tables.run_all(single_flights, [(n, files[n], args.duration) for n in configs], args.jobs)
-    campaigns = (paper_tables.run_all(campaign, [(files[n], args.campaign_flights, args.campaign_seed)
-                                                 for n in configs], args.jobs)
+    singles = run_all(single_flights, [(n, files[n], args.duration) for n in configs], args.jobs, STUDY,
+                      lambda task: f'{task[0]}: its 4 paper flights')
+    campaigns = (run_all(campaign, [(n, files[n], args.campaign_flights, args.campaign_seed) for n in configs],
+                         args.jobs, STUDY, lambda task: f'{task[0]}: its campaign of {task[2]} flights')
                  if args.campaign_flights else ['' for _ in configs])
-    lines = [f'### Ablation of the NNIT2FSMC defaults (paper helix {args.duration:g} s; bench/ablation.py)', '',
+    lines = [f'### Ablation of the NNIT2FSMC defaults (paper helix {args.duration:g} s; run_stack.py study ablation)',
+             '',
              '| configuration | RMSE [cm] nominal | 20 ms delay | noise | 30 ms lag | '
              f'campaign: finished, median RMSE [cm] ({args.campaign_flights} flights, seed {args.campaign_seed}) |',
              '|---|---:|---:|---:|---:|---:|']
     for name, single, small in zip(configs, singles, campaigns):
         lines.append(f'| {name} | {single["nominal"]} | {single["delay 20 ms"]} | {single["noise"]} | '
                      f'{single["lag 30 ms"]} | {small} |')
-    text = '\n'.join(lines)
-    print(text)
-    if args.out is not None:
-        args.out.write_text(text + '\n')
+    write_table(STUDY, args.out, '\n'.join(lines))
     return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

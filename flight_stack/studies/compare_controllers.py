@@ -1,12 +1,11 @@
-#!/usr/bin/env python3
-"""NNIT2FSMC against its baselines on the paper scenario, with and without the disturbances.
+"""The NNIT2FSMC-against-baselines tables of docs/BASELINES.md: the paper scenario, disturbances on and off.
 
 Flies every controller kind (factory.CONTROLLERS) on the paper's 60 s helix through the embedded backend
 (the same code path as ``run_stack.py --backend embedded``), with the section IV disturbances on
 and off, and prints a Markdown table of the metrics of :func:`quad_msgs_bridge.review.metrics.flight_metrics`
 after the settling time, the ratios behind the paper's central claim and the issue's checks.
 
-    .venv/bin/python bench/compare_controllers.py --out docs/results.md
+    run_stack.py study compare-controllers --out DIR
 
 Deterministic: the same command gives the same table (the network's initial weights are seeded).
 ``--allocation clip`` flies the paper's per-rotor clipping instead of thrust-priority allocation,
@@ -16,19 +15,18 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import multiprocessing
-import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
-from nnit2fsmc_controller.factory import CONTROLLERS, load_gains  # noqa: E402
-from nnit2fsmc_controller.trajectory import make_scenario  # noqa: E402
-from quad_msgs_bridge.mixer import ALLOCATIONS  # noqa: E402
-from quad_msgs_bridge.review.metrics import SUBSYSTEMS, flight_metrics  # noqa: E402
-from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
+from flight_stack.embedded import Perturbations, fly_embedded
+from nnit2fsmc_controller.factory import CONTROLLERS, load_gains
+from nnit2fsmc_controller.trajectory import make_scenario
+from quad_msgs_bridge.mixer import ALLOCATIONS
+from quad_msgs_bridge.review.metrics import SUBSYSTEMS, flight_metrics
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
+
+from .common import add_out, run_all, study_name, write_table
+
+STUDY = study_name(__name__)
 
 CONTROLS = ('U1', 'U2', 'U3', 'U4')
 # the issue's acceptance figures
@@ -123,9 +121,8 @@ def acceptance_lines(results) -> tuple[list[str], bool]:
     return lines, all(ok for _, ok, _ in checks)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument('--out', type=Path, default=None, help='also write the Markdown to this file')
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('--duration', type=float, default=60.0, help='flight length [s] (default: 60, the paper)')
     parser.add_argument('--settle-time', type=float, default=5.0, help='metrics ignore the first S seconds')
     parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz]')
@@ -134,25 +131,26 @@ def main(argv=None) -> int:
                         help='rotor-limit allocation of every controller (docs/BASELINES.md; clip: the paper\'s)')
     parser.add_argument('--mass-factor', type=float, default=1.0,
                         help='the flown vehicle\'s mass / the nominal one the controllers assume (default 1)')
-    args = parser.parse_args(argv)
 
+
+def run(args: argparse.Namespace) -> int:
+    """Exit status 0 when the central claim holds and the issue's acceptance passes, else 1."""
     cases = [(kind, disturbed, args.duration, args.settle_time, args.physics_rate, args.allocation, args.mass_factor)
              for disturbed in (True, False) for kind in CONTROLLERS]
     cases.sort(key=lambda case: case[0] != 'nnit2fsmc')   # the slowest flights first
     started = time.perf_counter()
-    if args.jobs > 1:
-        with multiprocessing.Pool(args.jobs) as pool:
-            outcomes = pool.map(fly_case, cases, chunksize=1)
-    else:
-        outcomes = [fly_case(case) for case in cases]
+    outcomes = run_all(fly_case, cases, args.jobs, STUDY,
+                       lambda case: f'{case[0]}, disturbances {"on" if case[1] else "off"}')
     wall = time.perf_counter() - started
     results = {(case[0], case[1]): metrics for case, metrics, _ in outcomes}
 
-    command = 'python bench/compare_controllers.py ' + ' '.join(argv if argv is not None else sys.argv[1:])
+    command = (f'run_stack.py study compare-controllers --duration {args.duration:g} --settle-time '
+               f'{args.settle_time:g} --physics-rate {args.physics_rate:g} --allocation {args.allocation} '
+               f'--mass-factor {args.mass_factor:g}')
     lines = [f'## NNIT2FSMC and baselines on the paper scenario ({args.duration:g} s helix, '
              f'metrics after {args.settle_time:g} s, allocation {args.allocation}, '
              f'true mass {args.mass_factor:g} x nominal)', '',
-             f'Produced by `{command.strip()}` ({len(cases)} flights, {wall:.0f} s wall with {args.jobs} processes).',
+             f'Produced by `{command}` ({len(cases)} flights, {wall:.0f} s wall with {args.jobs} processes).',
              '']
     for disturbed in (True, False):
         lines += main_table(results, disturbed) + ['']
@@ -161,13 +159,5 @@ def main(argv=None) -> int:
     lines += claim + [''] + accepted_lines + ['']
     lines.append(f'Central claim with disturbances: {"HOLDS" if claim_holds else "DOES NOT HOLD"}; '
                  f'issue acceptance: {"PASS" if accepted else "FAIL"}.')
-    text = '\n'.join(lines) + '\n'
-    print(text, end='')
-    if args.out is not None:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text)
+    write_table(STUDY, args.out, '\n'.join(lines))
     return 0 if accepted and claim_holds else 1
-
-
-if __name__ == '__main__':
-    sys.exit(main())

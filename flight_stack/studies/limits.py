@@ -1,7 +1,8 @@
-#!/usr/bin/env python3
-"""The structural limits of the NNIT2FSMC beside the baselines, with their figures.
+"""The gyro-bias and authority tables of docs/PAPER.md 4.8.5 and 4.8.8: the NNIT2FSMC's structural limits.
 
-    .venv/bin/python bench/limits.py [--duration 30] [--jobs 2] [--out limits.md]
+The structural limits of the NNIT2FSMC beside the baselines, with their figures.
+
+    run_stack.py study limits --out DIR [--duration 30] [--jobs 2]
 
 1. **Gyro bias.** A constant bias b on the measured yaw rate, hover at 1 m for 20 s (no disturbance),
    every controller through the default measurement stage: the mean true yaw error of the last 5 s
@@ -23,25 +24,23 @@ from __future__ import annotations
 
 import argparse
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-from paper_tables import run_all  # noqa: E402
-from flight_stack.closed_loop import ClosedLoop, FailureRules  # noqa: E402
-from flight_stack.embedded import Perturbations, fly_embedded  # noqa: E402
+from flight_stack.closed_loop import ClosedLoop, FailureRules
+from flight_stack.embedded import Perturbations, fly_embedded
 from nnit2fsmc_controller.factory import (build_controller, build_measurement_stage, flatten_gains, load_gains,
-                                          unflatten_gains)  # noqa: E402
-from nnit2fsmc_controller.trajectory import Helix, make_scenario  # noqa: E402
-from quad_msgs_bridge.review.metrics import flight_metrics  # noqa: E402
-from quad_msgs_bridge.vehicle_params import load_vehicle_file  # noqa: E402
-from quad_sim.model import QuadrotorModel  # noqa: E402
-from quad_sim.perturbations.wind import Wind  # noqa: E402
-from quad_sim.simulator import Simulator  # noqa: E402
+                                          unflatten_gains)
+from nnit2fsmc_controller.trajectory import Helix, make_scenario
+from quad_msgs_bridge.review.metrics import flight_metrics
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from quad_sim.model import QuadrotorModel
+from quad_sim.perturbations.wind import Wind
+from quad_sim.simulator import Simulator
+
+from .common import add_out, run_all, study_name, write_table
+
+STUDY = study_name(__name__)
 
 CONTROLLERS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral')
 BIAS = 0.05          #: [rad/s] on the measured yaw rate
@@ -95,23 +94,26 @@ def _bias_task(kind):
     return yaw_error_under_bias(kind)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('--duration', type=float, default=30.0, help='[s] helix flights (default 30)')
     parser.add_argument('--jobs', type=int, default=1)
-    parser.add_argument('--out', type=Path)
-    args = parser.parse_args(argv)
+
+
+def run(args: argparse.Namespace) -> int:
     rows = [(kind, False) for kind in CONTROLLERS] + [('nnit2fsmc', True)]
-    bias = run_all(_bias_task, list(CONTROLLERS), args.jobs)
+    bias = run_all(_bias_task, list(CONTROLLERS), args.jobs, STUDY, lambda kind: f'{kind}: hover with a gyro bias')
     tasks = [(kind, nn, WIND, 0.5, args.duration) for kind, nn in rows] + \
             [(kind, nn, 0.0, FAST, args.duration) for kind, nn in rows]
-    flown = dict(zip(tasks, run_all(helix_rmse, tasks, args.jobs)))
-    lines = [f'### Constant yaw-rate bias {BIAS:g} rad/s, hover {HOVER:g} s (bench/limits.py)', '',
+    flown = dict(zip(tasks, run_all(helix_rmse, tasks, args.jobs, STUDY,
+                                    lambda t: f'{t[0]}{", previous network" if t[1] else ""}: helix at {t[3]:g} '
+                                              f'rad/s in {t[2]:g} m/s wind')))
+    lines = [f'### Constant yaw-rate bias {BIAS:g} rad/s, hover {HOVER:g} s (run_stack.py study limits)', '',
              '| controller | steady yaw error [mrad] | formula [mrad] |', '|---|---:|---:|']
     lines += [f'| {kind} | {1e3 * e:.2f} | {1e3 * f:.2f} |' for kind, (e, f) in zip(CONTROLLERS, bias)]
     lines += ['', f'### Authority: helix ({args.duration:g} s) in a {WIND:g} m/s wind, and {FAST / 0.5:g}x faster '
-              '(bench/limits.py)', '', f'| controller | RMSE [cm] wind {WIND:g} m/s | RMSE [cm] helix x{FAST / 0.5:g} |',
-              '|---|---:|---:|']
+              '(run_stack.py study limits)', '',
+              f'| controller | RMSE [cm] wind {WIND:g} m/s | RMSE [cm] helix x{FAST / 0.5:g} |', '|---|---:|---:|']
     for kind, nn in rows:
         name = f'{kind}, previous x, y network' if nn else kind
         cells = []
@@ -119,12 +121,5 @@ def main(argv=None) -> int:
             rmse, failure = flown[task]
             cells.append(f'{rmse:.3g}' + (f' ({failure})' if failure else ''))
         lines.append(f'| {name} | {cells[0]} | {cells[1]} |')
-    text = '\n'.join(lines)
-    print(text)
-    if args.out is not None:
-        args.out.write_text(text + '\n')
+    write_table(STUDY, args.out, '\n'.join(lines))
     return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())

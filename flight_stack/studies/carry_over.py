@@ -1,5 +1,6 @@
-#!/usr/bin/env python3
-"""The NNIT2FSMC's failures of issue 28, flown by every controller kind, before and after (docs/PAPER.md 4.9).
+"""The issue-28 before-and-after tables of docs/VEHICLES.md and docs/PAPER.md 4.9, flown by every controller kind.
+
+The NNIT2FSMC's failures of issue 28, flown by every controller kind, before and after.
 
 Cases (``--cases``), each on ``--vehicle`` (a shipped name or a file) and ``--plant`` (quad_sim or rotorpy):
 
@@ -20,8 +21,12 @@ networks' adaptation rate (max_adaptation_rate 0). The baselines' gains did not 
 same commit's file has the same pid, smc_integral and se3 sections; l1-se3 and indi came later), so a
 baseline is flown once and its row stands for both.
 
-    .venv/bin/python bench/carry_over.py --cases circle --vehicle bench/vehicles/issue28-heavy-x.yaml
-    .venv/bin/python bench/carry_over.py --cases wind,loss --plant rotorpy --seeds 2 --duration 20
+    run_stack.py study carry-over --out DIR --cases circle --vehicle hummingbird
+    run_stack.py study carry-over --out DIR --cases wind,loss --plant rotorpy --seeds 2 --duration 20
+
+The vehicle defaults to the heavier X frame of issue 28 (HEAVY_X, beside this module in vehicles/). Writes a row per
+case, plant, kind and gains with the figures of every flight (one per wind seed) to DIR/carry-over.md, and with
+``--json`` the figures to DIR/carry-over.jsonl (appended, one JSON object per row).
 """
 from __future__ import annotations
 
@@ -29,16 +34,20 @@ import argparse
 import contextlib
 import copy
 import json
-import sys
 from pathlib import Path
 from unittest import mock
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from flight_stack.api import fly, load_gains, load_vehicle  # noqa: E402
-from nnit2fsmc_controller.gain_units import control_scale  # noqa: E402
-from quad_msgs_bridge.frames import body_rates_from_euler_rates  # noqa: E402
+from flight_stack.api import fly, load_gains, load_vehicle
+from nnit2fsmc_controller.gain_units import control_scale
+from quad_msgs_bridge.frames import body_rates_from_euler_rates
+
+from .common import add_out, names, progress, study_name, write_table
+
+STUDY = study_name(__name__)
+#: the peer's 0.826 kg X frame of issue 28 (docs/VEHICLES.md)
+HEAVY_X = Path(__file__).resolve().parent / 'vehicles' / 'issue28-heavy-x.yaml'
 
 KINDS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral', 'l1-se3', 'indi')
 SETTLED = 5.0     #: [s] metrics after it
@@ -103,40 +112,45 @@ def worlds(case: str, vehicle, plant: str, seeds: range) -> list[tuple[str, dict
     return [({'circle': 'circle-fast'}.get(case, case), common)]
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+#: the columns of a row: the figure, how a flight's value is written
+COLUMNS = (('RMSE [cm]', 'rmse_cm'), ('body-rate RMS [rad/s]', 'body_rate_rms'),
+           ('heading RMS [deg]', 'heading_rms_deg'), ('U1 max [N]', 'U1_max'), ('ended [s]', 'ended_s'))
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    add_out(parser)
     parser.add_argument('--cases', default='circle,wind,loss', help='comma-separated: lemniscate, circle, wind, loss')
-    parser.add_argument('--vehicle', default='bench/vehicles/issue28-heavy-x.yaml', help='shipped name or file')
+    parser.add_argument('--vehicle', default=str(HEAVY_X), help='shipped name or file (default: the heavier X frame)')
     parser.add_argument('--plant', default='quad_sim', help='quad_sim or rotorpy')
     parser.add_argument('--gains', default='before,after', help='before, after or both (comma-separated)')
     parser.add_argument('--kinds', default=','.join(KINDS))
     parser.add_argument('--seeds', type=int, default=3, help='wind seeds: how many')
     parser.add_argument('--first-seed', type=int, default=0, help='wind seeds: the first')
     parser.add_argument('--duration', type=float, default=30.0, help='[s] every flight')
-    parser.add_argument('--json', type=Path, help='append the results (one JSON object per line)')
-    args = parser.parse_args(argv)
-    for case in args.cases.split(','):
-        for kind in args.kinds.split(','):
-            for which in args.gains.split(','):
+    parser.add_argument('--json', action='store_true', help='also append the figures to DIR/carry-over.jsonl')
+
+
+def run(args: argparse.Namespace) -> int:
+    lines = ['| case | plant | kind | gains | finished | ' + ' | '.join(title for title, _ in COLUMNS) + ' |',
+             '|---|---|---|---|---:|' + '---|' * len(COLUMNS)]
+    for case in names(args.cases):
+        for kind in names(args.kinds):
+            for which in names(args.gains):
                 if which == 'before' and not kind.startswith('nnit2fsmc'):
                     continue   # the baselines' gains are the same before and after: flown once, as 'after'
                 with gains_of(which, args.vehicle) as gains:
                     rows = [flown(kind, scenario, args.duration, gains, **world)
                             for scenario, world in worlds(case, args.vehicle, args.plant,
-                                                                  range(args.first_seed, args.first_seed + args.seeds))]
+                                                          range(args.first_seed, args.first_seed + args.seeds))]
                 label = which if kind.startswith('nnit2fsmc') else 'both'
-                print(f'{case:10s} {args.plant:8s} {kind:13s} {label:6s} finished {sum(r["finished"] for r in rows)}'
-                      f'/{len(rows)}  RMSE [cm] ' + ' '.join(f'{r["rmse_cm"]:.2f}' for r in rows)
-                      + '  body-rate RMS [rad/s] ' + ' '.join(f'{r["body_rate_rms"]:.2f}' for r in rows)
-                      + '  heading RMS [deg] ' + ' '.join(f'{r["heading_rms_deg"]:.2f}' for r in rows)
-                      + '  U1 max [N] ' + ' '.join(f'{r["U1_max"]:.2f}' for r in rows)
-                      + '  ended [s] ' + ' '.join(f'{r["ended_s"]:.2f}' for r in rows), flush=True)
+                finished = f'{sum(r["finished"] for r in rows)}/{len(rows)}'
+                lines.append(f'| {case} | {args.plant} | {kind} | {label} | {finished} | '
+                             + ' | '.join(' '.join(f'{r[key]:.2f}' for r in rows) for _, key in COLUMNS) + ' |')
+                progress(STUDY, f'{case}, {kind}, gains {label}: {len(rows)} flights, finished {finished}')
                 if args.json:
-                    with args.json.open('a') as out:
+                    args.out.mkdir(parents=True, exist_ok=True)
+                    with (args.out / f'{STUDY}.jsonl').open('a') as out:
                         out.write(json.dumps({'case': case, 'vehicle': str(args.vehicle), 'plant': args.plant,
                                               'kind': kind, 'gains': label, 'rows': rows}) + '\n')
+    write_table(STUDY, args.out, '\n'.join(lines))
     return 0
-
-
-if __name__ == '__main__':
-    sys.exit(main())
