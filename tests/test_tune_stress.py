@@ -17,7 +17,7 @@ from flight_stack.campaign.results import read_flights, wilson_interval
 from flight_stack.campaign.runner import RunOptions, run_campaign
 from flight_stack.campaign.sampling import sample_conditions
 from flight_stack.campaign.spec import parse_spec
-from flight_stack.campaign.stress import (KINDS, BreakingPoint, StressSetup, Tally, find_breaking_point,
+from flight_stack.campaign.stress import (KINDS, BreakingPoint, StressSetup, Tally, describe, find_breaking_point,
                                           highest_intensity, read_tries, stress, write_breaking_points,
                                           write_tries)
 from flight_stack.campaign.tune import TuneSetup, objective, tune
@@ -163,13 +163,59 @@ def synthetic(threshold: float, flights: int = 400):
 
 
 def test_the_bisection_finds_the_threshold_of_a_synthetic_curve():
+    """Near the threshold the smooth curve's shares lie within their intervals' reach of 90 % even with 400
+    flights: the bracket is found, but reported as a range (issue 35)."""
     rate_at, asked = synthetic(7.3)
     point = find_breaking_point(rate_at, 0.0, 20.0, 0.25)
-    assert point.status == 'found'
     assert point.low < 7.3 <= point.high and point.high - point.low <= 0.25 + 1e-12
     assert len(asked) == len(set(asked)) <= 2 + math.ceil(math.log2(20.0 / 0.25))
     assert point.tries[point.low].share >= 0.9 > point.tries[point.high].share
     assert point.value == point.high
+    assert point.status == 'range' and not point.tries[point.low].surely_holds
+    sure_low, sure_high = point.bounds()
+    assert sure_low < point.low and point.high <= sure_high     # the tries that are sure lie around the bracket
+    assert point.tries[sure_low].interval[0] >= 0.9 > point.tries[sure_high].interval[1]
+
+
+@pytest.mark.parametrize('flights, status', [(20, 'range'), (5, 'range'), (35, 'found'), (100, 'found')])
+def test_a_breaking_point_is_found_only_when_the_intervals_at_its_bracket_do_not_straddle_90_percent(flights, status):
+    """Issue 35: 5 flights per try reported 'found' where the Wilson interval (38-96 %) straddles 90 %. A step from
+    every flight succeeding to none at 7.3: with n flights all n succeed below it, whose interval reaches below
+    90 % up to n = 34 (20 of 20: 84-100 %), so only n >= 35 finds the point."""
+    def rate_at(x: float) -> Tally:
+        return Tally(flights if x < 7.3 else 0, flights)
+    point = find_breaking_point(rate_at, 0.0, 20.0, 0.25)
+    assert (point.low, point.high) == (7.25, 7.5) and point.status == status
+    assert (wilson_interval(flights, flights)[0] >= 0.9) == (status == 'found')
+    sure_low, sure_high = point.bounds()
+    assert sure_high == 7.5 and (sure_low == 7.25 if status == 'found' else math.isnan(sure_low))
+    text = describe(point, KINDS['wind'])
+    if status == 'range':
+        low, high = wilson_interval(flights, flights)
+        assert text.startswith('a range, not a point: at or below 7.5 (steady wind speed [m/s]); the share falls '
+                               f'below 90% between 7.25 and 7.5, but the 95 % intervals there ({low:.0%}-{high:.0%}, '
+                               '0%-')
+    else:
+        assert text.startswith('breaking point 7.5 (steady wind speed [m/s])')
+
+
+def test_breaking_points_csv_says_a_range_and_its_intervals(tmp_path):
+    setup = StressSetup(CALM, KINDS['wind'], ('pid', 'se3'), tmp_path, RunOptions(), 0.0, 20.0, 0.25)
+    results = {'pid': BreakingPoint('range', 5.0, 5.25, {0.0: Tally(20, 20), 5.0: Tally(5, 5), 5.25: Tally(3, 5),
+                                                         20.0: Tally(0, 20)}),
+               'se3': BreakingPoint('found', 5.0, 5.25, {5.0: Tally(100, 100), 5.25: Tally(50, 100)})}
+    write_breaking_points(setup, results)
+    with (tmp_path / 'breaking_points.csv').open() as stream:
+        rows = {row['controller']: row for row in csv.DictReader(stream)}
+    pid, se3 = rows['pid'], rows['se3']
+    assert pid['status'] == 'range' and float(pid['breaking_point']) == 5.25
+    assert math.isnan(float(pid['range_low'])) and float(pid['range_high']) == 5.25      # 3 of 5: 23-88 %
+    assert (float(pid['holds_at_wilson95_low']), float(pid['holds_at_wilson95_high'])) \
+        == pytest.approx(wilson_interval(5, 5))
+    assert (float(pid['fails_at_wilson95_low']), float(pid['fails_at_wilson95_high'])) \
+        == pytest.approx(wilson_interval(3, 5))
+    assert pid['note'].startswith('a range, not a point: at or below 5.25')
+    assert se3['status'] == 'found' and (float(se3['range_low']), float(se3['range_high'])) == (5.0, 5.25)
 
 
 def test_the_bisection_says_when_the_range_holds_no_breaking_point():
@@ -204,11 +250,11 @@ def test_stress_runs_on_a_tiny_real_campaign(scheduler, tmp_path):
     point = points['pid']
     # nominal mass: every flight succeeds; 2.2 times the mass needs 98 % of full thrust to hover
     assert point.tries[1.0].successes == 3 and point.tries[2.2].successes == 0
-    assert point.status == 'found' and sorted(point.tries) == [1.0, 1.6, 2.2]
+    assert point.status == 'range' and sorted(point.tries) == [1.0, 1.6, 2.2]   # 3 flights: 3 of 3 is 44-100 %
     assert point.value == (1.6 if point.tries[1.6].share < 0.9 else 2.2)
     with (tmp_path / 'breaking_points.csv').open() as stream:
         rows = list(csv.DictReader(stream))
-    assert [(r['kind'], r['controller'], r['status']) for r in rows] == [('mass', 'pid', 'found')]
+    assert [(r['kind'], r['controller'], r['status']) for r in rows] == [('mass', 'pid', 'range')]
     assert float(rows[0]['breaking_point']) == point.value
     with (tmp_path / 'stress-mass.csv').open() as stream:
         tries = list(csv.DictReader(stream))

@@ -22,7 +22,8 @@ An intensity must mean something: at least 0 (wind, delay, motor lag, noise), ab
 A flight succeeds when it finishes with a position RMSE below 10 cm. The breaking point is the
 intensity where the success share falls below 90 %: found by bisection between the range's ends
 (success assumed to fall as the intensity grows), to the kind's resolution. Each try's share comes
-with its 95 % Wilson interval. Tries are kept in ``DIR/<kind>/<controller>/<intensity>/`` (campaign
+with its 95 % Wilson interval; the point is 'found' only when the intervals at the two bracketing
+tries do not straddle 90 %, else it is a 'range' (:class:`BreakingPoint`). Tries are kept in ``DIR/<kind>/<controller>/<intensity>/`` (campaign
 folders), so the same command again reuses every campaign it finished.
 """
 from __future__ import annotations
@@ -116,6 +117,16 @@ class Tally:
     def holds(self) -> bool:
         return self.share >= BREAKING_SHARE
 
+    @property
+    def surely_holds(self) -> bool:
+        """The whole 95 % interval is at or above 90 %."""
+        return self.interval[0] >= BREAKING_SHARE
+
+    @property
+    def surely_fails(self) -> bool:
+        """The whole 95 % interval is below 90 %."""
+        return self.interval[1] < BREAKING_SHARE
+
 
 def tally(rows: list[dict]) -> Tally:
     """Success (finished with RMSE below 10 cm) over the flights.csv rows of one try."""
@@ -124,9 +135,15 @@ def tally(rows: list[dict]) -> Tally:
 
 @dataclass(frozen=True)
 class BreakingPoint:
-    """Where the success share of one controller falls below 90 % (see :attr:`status`)."""
+    """Where the success share of one controller falls below 90 % (see :attr:`status`).
 
-    status: str        #: 'found' | 'above_range' (none found: holds at ``high``) | 'at_or_below_low'
+    ``status``: 'found' when the bisection's bracket is sure: the whole 95 % Wilson interval of the share at
+    ``low`` is at or above 90 % and the whole one at ``high`` below it; 'range' when the bisection ended
+    but one of those intervals straddles 90 % (too few flights per try to tell the point to the
+    resolution: it lies in :meth:`bounds`); 'above_range' (none found: holds at ``high``) or
+    'at_or_below_low' when the range's ends did not bracket it."""
+
+    status: str        #: 'found' | 'range' | 'above_range' | 'at_or_below_low'
     low: float         #: the highest intensity tried where it holds (nan if none)
     high: float        #: the lowest intensity tried where it fails (nan if none)
     tries: dict        #: intensity -> Tally
@@ -134,8 +151,20 @@ class BreakingPoint:
     @property
     def value(self) -> float:
         """The breaking point: the lowest intensity tried where the share is below 90 % (a bound, not a
-        value, unless ``status`` is 'found')."""
+        value, unless ``status`` is 'found'; for 'range' the point estimate within :meth:`bounds`)."""
         return self.high if self.status != 'above_range' else self.low
+
+    def bounds(self) -> tuple[float, float]:
+        """Where the breaking point surely lies, as far as the tries tell: (the highest intensity tried whose
+        whole 95 % interval is at or above 90 %, the lowest whose whole interval is below it), nan where no
+        try is that sure (the point may then lie beyond the intensities tried)."""
+        sure_holds = [x for x, t in self.tries.items() if t.surely_holds]
+        sure_fails = [x for x, t in self.tries.items() if t.surely_fails]
+        return (max(sure_holds) if sure_holds else math.nan, min(sure_fails) if sure_fails else math.nan)
+
+    def interval_at(self, intensity: float) -> tuple[float, float]:
+        """The 95 % Wilson interval of the share at a tried ``intensity`` ((nan, nan) for nan: none tried)."""
+        return self.tries[intensity].interval if intensity in self.tries else (math.nan, math.nan)
 
 
 def snap(value: float, resolution: float) -> float:
@@ -170,7 +199,8 @@ def find_breaking_point(rate_at: Callable[[float], Tally], low: float, high: flo
             low = middle
         else:
             high = middle
-    return BreakingPoint('found', low, high, tries)
+    sure = tries[low].surely_holds and tries[high].surely_fails
+    return BreakingPoint('found' if sure else 'range', low, high, tries)
 
 
 @dataclass(frozen=True)
@@ -218,10 +248,23 @@ def stress(setup: StressSetup, progress: bool = True) -> dict[str, BreakingPoint
     return results
 
 
+def _percent(interval: tuple[float, float]) -> str:
+    return f'{interval[0]:.0%}-{interval[1]:.0%}'
+
+
 def describe(point: BreakingPoint, kind: DisturbanceKind) -> str:
     if point.status == 'found':
         return (f'breaking point {point.high:g} ({kind.intensity}): below {BREAKING_SHARE:.0%} there, '
                 f'at or above it at {point.low:g}')
+    if point.status == 'range':
+        sure_low, sure_high = point.bounds()
+        where = ' and '.join([*([f'above {sure_low:g}'] if math.isfinite(sure_low) else []),
+                              *([f'at or below {sure_high:g}'] if math.isfinite(sure_high) else [])])
+        return (f'a range, not a point: {where or "no try is sure of either side"} ({kind.intensity}); the '
+                f'share falls below {BREAKING_SHARE:.0%} between {point.low:g} and {point.high:g}, but the 95 % '
+                f'intervals there ({_percent(point.interval_at(point.low))}, '
+                f'{_percent(point.interval_at(point.high))}) straddle {BREAKING_SHARE:.0%}: more flights per try '
+                'narrow it')
     if point.status == 'above_range':
         return f'no breaking point up to {point.low:g} ({kind.intensity}): a lower bound, none found'
     return f'already below {BREAKING_SHARE:.0%} at {point.high:g} ({kind.intensity}): an upper bound'
@@ -252,7 +295,9 @@ def write_tries(setup: StressSetup, results: dict[str, BreakingPoint]) -> Path:
 
 
 BREAKING_COLUMNS = ('kind', 'controller', 'intensity', 'status', 'breaking_point', 'holds_at', 'fails_at',
-                    'flights_per_try', 'tries', 'success_rmse_m', 'breaking_share', 'note')
+                    'range_low', 'range_high', 'holds_at_wilson95_low', 'holds_at_wilson95_high',
+                    'fails_at_wilson95_low', 'fails_at_wilson95_high', 'flights_per_try', 'tries', 'success_rmse_m',
+                    'breaking_share', 'note')
 
 
 def write_breaking_points(setup: StressSetup, results: dict[str, BreakingPoint]) -> Path:
@@ -266,7 +311,10 @@ def write_breaking_points(setup: StressSetup, results: dict[str, BreakingPoint])
     rows = kept + [{
         'kind': setup.kind.name, 'controller': controller, 'intensity': setup.kind.intensity,
         'status': point.status, 'breaking_point': point.value,
-        'holds_at': point.low, 'fails_at': point.high, 'flights_per_try': setup.spec.flights,
+        'holds_at': point.low, 'fails_at': point.high, **dict(zip(('range_low', 'range_high'), point.bounds())),
+        **dict(zip(('holds_at_wilson95_low', 'holds_at_wilson95_high'), point.interval_at(point.low))),
+        **dict(zip(('fails_at_wilson95_low', 'fails_at_wilson95_high'), point.interval_at(point.high))),
+        'flights_per_try': setup.spec.flights,
         'tries': len(point.tries), 'success_rmse_m': SUCCESS_RMSE_M, 'breaking_share': BREAKING_SHARE,
         'note': describe(point, setup.kind)} for controller, point in results.items()]
     with path.open('w', newline='') as stream:

@@ -314,7 +314,8 @@ def _margin_task(task) -> dict:
 # --- 3. tables ---------------------------------------------------------------------------------------------
 
 def breaking_lines(path: Path, kinds, disturbances) -> list[str]:
-    """Kind x disturbance: the breaking point (found: 'x (holds at y)'; none up to the range's end: '> x';
+    """Kind x disturbance: the breaking point (found: 'x (holds at y)'; a range, the 95 % intervals at x and y
+    straddling 90 %: 'x? (holds at y; ...)'; none up to the range's end: '> x';
     already below 90 % at the low end: '<= x'; no search yet: 'not flown'), from stress's breaking_points.csv."""
     if not path.exists():
         return ['(no breaking point flown yet)']
@@ -331,6 +332,9 @@ def breaking_lines(path: Path, kinds, disturbances) -> list[str]:
                 cells.append('not flown')
             elif row['status'] == 'found':
                 cells.append(f'{float(row["fails_at"]):g} (holds at {float(row["holds_at"]):g})')
+            elif row['status'] == 'range':
+                cells.append(f'{float(row["fails_at"]):g}? (holds at {float(row["holds_at"]):g}; the intervals '
+                             'straddle 90 %)')
             elif row['status'] == 'above_range':
                 cells.append(f'> {float(row["holds_at"]):g}')
             else:
