@@ -102,7 +102,7 @@ def fly(controller=None, scenario: str = 'paper', *, duration: float | None = No
     ``read_flight(out / 'bag')`` gives the same flight back; without it nothing is written. Raises
     ParameterError (a ValueError) naming the argument before flying on any invalid setting.
     """
-    from .cli import run_flight
+    from .runs import run_flight
     controller = choose_controller(None if controller is None else controller_name(controller), gains)
     return run_flight(controller, scenario, duration=duration, disturbances=disturbances, seed=seed,
                       vehicle=vehicle, gains=gains, physics_rate=physics_rate, settle_time=settle_time,
