@@ -1,6 +1,6 @@
 """``run_stack.py export BAG --format {csv,parquet} --out FILE``: a recorded flight as a table, one row per
 control step, every column named with its unit (``time_s``, ``x_m``, ``vx_mps``, ``phi_rad``, ``U1_N``,
-``U4_Nm``, ``S_x_mps``, ``nn_z_N``, ...; see :func:`unit_column_names`).
+``U4_Nm``, ``S_x_mps``, ``nn_z_N``, ...; see :meth:`~quad_msgs_bridge.review.flight_data.Flight.unit_names`).
 
 The columns are those of :meth:`quad_msgs_bridge.review.flight_data.Flight.columns`: the 12 states as the
 odometry gives them (Euler-angle rates ``dphi dtheta dpsi``), the reference, the rotor thrusts F1..F4,
@@ -21,21 +21,14 @@ from pathlib import Path
 import numpy as np
 
 FORMATS = ('csv', 'parquet')
-#: a unit -> the suffix of a column name in that unit
-UNIT_SUFFIXES = {'s': 's', 'm': 'm', 'm/s': 'mps', 'm/s^2': 'mps2', 'rad': 'rad', 'rad/s': 'radps', 'N': 'N',
-                 'N m': 'Nm'}
 PARQUET_HINT = ('--format parquet needs pyarrow, which the flight stack does not install: pip install '
                 'pyarrow==25.0.0 (or pip install ".[parquet]"), or export --format csv')
 
 
-def unit_column_names(flight) -> dict[str, str]:
-    """Each of ``flight.columns()`` -> its name with its unit: ``x`` -> ``x_m``, ``U4`` -> ``U4_Nm``."""
-    return {name: f'{name}_{UNIT_SUFFIXES[unit]}' for name, unit in flight.column_units().items()}
-
-
 def flight_table(flight) -> dict[str, np.ndarray]:
-    """The flight's columns under their names with units, time first (one row per kept step)."""
-    names = unit_column_names(flight)
+    """The flight's columns under their names with units (``Flight.unit_names``, as ``Flight.to_pandas`` names
+    them), time first (one row per kept step)."""
+    names = flight.unit_names()
     return {names[name]: values for name, values in flight.columns().items()}
 
 

@@ -105,10 +105,22 @@ def test_to_pandas_gives_one_column_per_series_indexed_by_time(flown_with_bag):
     pytest.importorskip('pandas', reason='pandas is not installed (requirements-test.txt pins it)')
     flown, _ = flown_with_bag
     frame = flown.to_pandas()
-    assert frame.shape == (3000, 42) and list(frame.columns) == list(flown.columns())[1:]
+    names = flown.unit_names()
+    assert frame.shape == (3000, 42) and list(frame.columns) == [names[name] for name in list(flown.columns())[1:]]
     assert frame.index.name == 'time_s' and np.array_equal(frame.index.to_numpy(), flown.time)
-    assert np.array_equal(frame['U4'].to_numpy(), flown.controls[:, 3])
-    assert frame.loc[1.5, 'z'] == flown.state[1500, 2]      # a row by its sim time [s]
+    assert np.array_equal(frame['U4_Nm'].to_numpy(), flown.controls[:, 3])
+    assert frame.loc[1.5, 'z_m'] == flown.state[1500, 2]      # a row by its sim time [s]
+
+
+def test_to_pandas_names_its_columns_with_units_as_the_export_does(flown_with_bag, tmp_path):
+    """Issue 35: to_pandas' columns had no units while the CSV export's do; both take them from Flight.unit_names."""
+    pytest.importorskip('pandas', reason='pandas is not installed (requirements-test.txt pins it)')
+    from flight_stack.export import export_flight
+    flown, out = flown_with_bag
+    header = export_flight(out / 'bag', tmp_path / 'flight.csv').read_text().splitlines()[0].split(',')
+    frame = flown.to_pandas()
+    assert [frame.index.name, *frame.columns] == header
+    assert header[:5] == ['time_s', 'x_m', 'y_m', 'z_m', 'vx_mps'] and 'U4_Nm' in header and 'nn_z_N' in header
 
 
 def synthetic_steps(count: int):

@@ -51,6 +51,9 @@ SURFACE_UNITS = ('m/s', 'm/s', 'm/s', 'rad/s', 'rad/s', 'rad/s')
 #: the units of each subsystem's virtual control, and so of its NN (equivalent) and fuzzy (corrective) terms:
 #: commanded accelerations (x, y), U1 (z), U2, U3 (phi, theta) and U4 (psi)
 VIRTUAL_CONTROL_UNITS = ('m/s^2', 'm/s^2', 'N', 'N', 'N', 'N m')
+#: a unit -> the suffix of a column name in that unit (:meth:`Flight.unit_names`: ``x`` [m] -> ``x_m``)
+UNIT_SUFFIXES = {'s': 's', 'm': 'm', 'm/s': 'mps', 'm/s^2': 'mps2', 'rad': 'rad', 'rad/s': 'radps', 'N': 'N',
+                 'N m': 'Nm'}
 WIDTH = sum(columns for columns, _ in SERIES.values())   #: columns of a row of all SERIES side by side
 _SLICES, _start = {}, 0
 for _name, (_columns, _) in SERIES.items():
@@ -156,16 +159,24 @@ class Flight:
             units.update((f'{prefix}_{axis}', unit) for axis, unit in zip(SUBSYSTEMS, VIRTUAL_CONTROL_UNITS))
         return units
 
+    def unit_names(self) -> dict[str, str]:
+        """Each of :meth:`columns` -> its name with its unit (UNIT_SUFFIXES): ``time`` -> ``time_s``, ``x`` ->
+        ``x_m``, ``vx`` -> ``vx_mps``, ``U4`` -> ``U4_Nm``, ``nn_z`` -> ``nn_z_N``: the columns of
+        :meth:`to_pandas` and of ``run_stack.py export``."""
+        return {name: f'{name}_{UNIT_SUFFIXES[unit]}' for name, unit in self.column_units().items()}
+
     def to_pandas(self):
-        """A pandas DataFrame of :meth:`columns` but ``time``, one row per kept step, indexed by sim time
+        """A pandas DataFrame of :meth:`columns` but ``time``, named with their units as ``run_stack.py export``
+        names them (:meth:`unit_names`: ``x_m``, ``U1_N``, ...), one row per kept step, indexed by sim time
         (index ``time_s`` [s]). Needs pandas (not a dependency of the stack: ``pip install pandas``)."""
         try:
             import pandas
         except ImportError as error:
             raise ImportError('Flight.to_pandas needs pandas, which the flight stack does not install: '
                               'pip install pandas (or use Flight.columns(), numpy arrays)') from error
-        columns = self.columns()
-        index = pandas.Index(columns.pop('time'), name='time_s')
+        names = self.unit_names()
+        columns = {names[name]: values for name, values in self.columns().items()}
+        index = pandas.Index(columns.pop(names['time']), name=names['time'])
         return pandas.DataFrame(columns, index=index)
 
 
