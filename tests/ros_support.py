@@ -12,6 +12,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 SKIP_REASON = ('rclpy cannot be imported here: the ROS 2 integration tests run in .venv-ros-wheels (bash '
@@ -90,7 +91,7 @@ def wait_until(condition, timeout: float) -> bool:
     return True
 
 
-def odom_gate_once_matched(node, readers, namespace: str, timeout: float = 60.0):
+def odom_gate_once_matched(node, readers, namespace: str, timeout: float = HANG_TIMEOUT_S):
     """The gate of a lockstep flight that ``node`` must see whole: an odom subscription of ``node`` in ``namespace``,
     made once each of ``readers`` (subscriptions of ``node``) reports its publishers matched on its own side. Start
     the simulator with one more ``wait_for_subscribers`` than its real odom readers (and a ``start_delay`` for the

@@ -17,9 +17,10 @@ from rosbags.highlevel import AnyReader
 from quad_msgs_bridge.bag.metadata import read_metadata
 from quad_msgs_bridge.bag.reader import McapPrefix, is_finalized, mcap_file
 from quad_msgs_bridge.review.command import review_bags
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
-STARTUP_TIMEOUT = 60.0
+STARTUP_TIMEOUT = HANG_TIMEOUT_S   #: [s] for the flight to start recording: only a hang takes that long
 
 
 def start_flight(out: Path) -> subprocess.Popen:
@@ -57,7 +58,7 @@ def test_sigint_or_sigterm_finalizes_the_bag(tmp_path, stop):
     bag = wait_for_chunks(process, out)
     storage = bag / 'bag_0.mcap'
     process.send_signal(stop)
-    _, stderr = process.communicate(timeout=60)
+    _, stderr = process.communicate(timeout=HANG_TIMEOUT_S)
     assert process.returncode == 130
     assert f'interrupted; bag closed: {bag}' in stderr and f'the unfinished run stays in {bag.parent}' in stderr
     assert is_finalized(storage)
@@ -78,7 +79,7 @@ def test_sigkill_leaves_a_readable_prefix_that_recover_finalizes(tmp_path):
     bag = wait_for_chunks(process, out)
     storage = bag / 'bag_0.mcap'
     os.killpg(process.pid, signal.SIGKILL)
-    process.communicate(timeout=60)
+    process.communicate(timeout=HANG_TIMEOUT_S)
     assert not is_finalized(storage)
     assert read_metadata(bag)['storage_identifier'] == 'mcap'     # written at the start: still a bag
 

@@ -19,7 +19,8 @@ from flight_stack.campaign.results import read_flights, wilson_interval
 from flight_stack.campaign.runner import RunOptions, run_campaign
 from flight_stack.campaign.spec import parse_spec
 from nnit2fsmc_controller.factory import load_gains
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCUMENT = {
@@ -147,11 +148,11 @@ def test_ctrl_c_keeps_every_finished_batch_and_resume_flies_the_rest(reference_r
     for attempt in range(5):      # on a loaded machine the short campaign may end before the signal lands
         out = tmp_path / f'out{attempt}'
         process = run_cli(spec_file, '--out', out, '--workers', 1, '--batch-size', 1, '--quiet')
-        deadline = time.monotonic() + 120
+        deadline = time.monotonic() + HANG_TIMEOUT_S
         while len(read_flights(out / 'flights.csv')) < 2 and time.monotonic() < deadline:
             time.sleep(0.01)
         process.send_signal(signal.SIGINT)
-        _, stderr = process.communicate(timeout=60)
+        _, stderr = process.communicate(timeout=HANG_TIMEOUT_S)
         if not (process.returncode == 0 and len(read_flights(out / 'flights.csv')) == 10):
             break                 # the signal landed while flying
     assert process.returncode == 130, stderr
@@ -161,7 +162,7 @@ def test_ctrl_c_keeps_every_finished_batch_and_resume_flies_the_rest(reference_r
     reference = rows_by_key(reference_run)
     assert_same_rows(kept, {key: reference[key] for key in kept})
     resumed = run_cli(spec_file, '--out', out, '--workers', 2, '--resume', '--quiet')
-    stdout, stderr = resumed.communicate(timeout=600)
+    stdout, stderr = resumed.communicate(timeout=HANG_TIMEOUT_S)
     assert resumed.returncode == 0, stderr
     assert f'flew {10 - len(kept)} flights' in stderr
     assert_same_rows(reference, rows_by_key(out))
@@ -230,7 +231,7 @@ def test_bad_options_are_refused_before_flying(tmp_path, args, message):
     spec_file = tmp_path / 'spec.yaml'
     spec_file.write_text(yaml.safe_dump(DOCUMENT))
     process = run_cli(spec_file, '--out', tmp_path / 'out', *args)
-    _, stderr = process.communicate(timeout=120)
+    _, stderr = process.communicate(timeout=HANG_TIMEOUT_S)
     assert process.returncode == 2 and stderr.startswith(f'error: {message}'), stderr
     assert not (tmp_path / 'out' / 'flights.csv').exists()
 
@@ -243,7 +244,7 @@ def test_a_gains_file_wrong_for_a_controller_of_the_spec_is_refused_before_flyin
     gains_file = tmp_path / 'gains.yaml'
     gains_file.write_text(yaml.safe_dump(gains))
     process = run_cli(spec_file, '--out', tmp_path / 'out', '--gains', gains_file)
-    _, stderr = process.communicate(timeout=120)
+    _, stderr = process.communicate(timeout=HANG_TIMEOUT_S)
     assert process.returncode == 2 and 'error: common.low_altitude_height: -1.0 is outside' in stderr, stderr
     assert not (tmp_path / 'out').exists()
 
@@ -290,7 +291,7 @@ def test_campaign_out_that_is_a_file_is_a_one_line_error(tmp_path):
     a_file.write_text('keep me\n')
     for out in (a_file, a_file / 'sub'):
         process = run_cli(spec_file, '--out', out, '--quiet')
-        _, stderr = process.communicate(timeout=120)
+        _, stderr = process.communicate(timeout=HANG_TIMEOUT_S)
         assert process.returncode == 2, stderr
         assert stderr.splitlines()[-1].startswith(f'error: --out: {a_file}') and 'Traceback' not in stderr, stderr
     assert a_file.read_text() == 'keep me\n'
@@ -323,7 +324,8 @@ def write_script(tmp_path: Path, guarded: bool) -> Path:
 
 def test_a_script_calling_run_campaign_without_the_main_guard_is_refused_before_anything_is_made(tmp_path):
     script = write_script(tmp_path, guarded=False)
-    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=HANG_TIMEOUT_S)
     assert result.returncode == 1
     assert result.stdout.count('the script runs') == 1          # no worker ran it again
     last = result.stderr.strip().splitlines()
@@ -337,7 +339,8 @@ def test_a_script_calling_run_campaign_without_the_main_guard_is_refused_before_
 @pytest.mark.slow
 def test_the_same_script_with_the_main_guard_flies(tmp_path):
     script = write_script(tmp_path, guarded=True)
-    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    result = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True,
+                            timeout=HANG_TIMEOUT_S)
     assert result.returncode == 0, result.stderr
     assert result.stdout.count('flown') == 1   # (its unguarded lines run again in the worker: spawn imports it)
     assert len(read_flights(tmp_path / 'out' / 'flights.csv')) == 1
@@ -377,7 +380,7 @@ def test_a_signal_stops_a_campaign_in_every_phase_and_resume_still_works(tmp_pat
         if len(read_flights(out / 'flights.csv')) >= 1:
             break
     earlier.send_signal(signal.SIGINT)
-    _, stderr = earlier.communicate(timeout=60)
+    _, stderr = earlier.communicate(timeout=HANG_TIMEOUT_S)
     assert earlier.returncode == 130 and 'rerun with --resume' in stderr, stderr
     before = (out / 'flights.csv').read_text()
     assert len(read_flights(out / 'flights.csv')) >= 1
@@ -387,7 +390,7 @@ def test_a_signal_stops_a_campaign_in_every_phase_and_resume_still_works(tmp_pat
             break
     sent = time.monotonic()
     process.send_signal(signal_number)
-    _, stderr = process.communicate(timeout=60)
+    _, stderr = process.communicate(timeout=HANG_TIMEOUT_S)
     stopped_after = time.monotonic() - sent
     print(f'{phase}, signal {signal_number}: stopped {stopped_after:.2f} s after the signal')
     assert process.returncode == 130, stderr

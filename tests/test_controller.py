@@ -16,8 +16,10 @@ from quad_msgs_bridge.frames import rotation_from_euler
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.reference import ReferenceSample, hold
 from quad_msgs_bridge.state import DPHI, DPSI, DTHETA, VX, VY, VZ
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from vehicle_support import ASYMMETRIC, paper_eq1
+from hang_guard import HANG_TIMEOUT_S
 
 PARAMS, _ = load_vehicle_file()
 GAINS = load_gains()
@@ -461,6 +463,6 @@ def test_compile_kernels_builds_every_kernel_of_a_single_vehicle_before_its_firs
     root = Path(__file__).resolve().parent.parent
     paths = [str(root / 'ros2_ws' / 'src' / package) for package in ('quad_msgs_bridge', 'nnit2fsmc_controller')]
     result = subprocess.run([sys.executable, '-c', COMPILED_KERNELS, *paths], capture_output=True, text=True,
-                            timeout=300, check=True)
+                            timeout=HANG_TIMEOUT_S, check=True)
     before, after = json.loads(result.stdout)
     assert before == [0] * 5 and all(count >= 1 for count in after)

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -17,7 +18,7 @@ def bare_python(*args, cwd, env=None):
     """This interpreter without its site-packages (-S): numpy, numba, ... cannot be imported."""
     environment = {k: v for k, v in os.environ.items() if k not in ('PYTHONPATH', 'NNIT2FSMC_REEXEC')}
     return subprocess.run([sys.executable, '-S', *map(str, args)], cwd=cwd, capture_output=True, text=True,
-                          timeout=300, env={**environment, **(env or {})})
+                          timeout=HANG_TIMEOUT_S, env={**environment, **(env or {})})
 
 
 def test_run_stack_without_the_packages_and_without_a_venv_says_how_to_run_in_one_line(tmp_path):
@@ -38,7 +39,7 @@ def test_run_stack_without_the_packages_runs_again_with_the_clone_s_venv():
 
 def test_help_names_the_subcommands_and_the_caps():
     result = subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), '--help'], cwd=ROOT, capture_output=True,
-                            text=True, timeout=300)
+                            text=True, timeout=HANG_TIMEOUT_S)
     assert result.returncode == 0, result.stderr
     text = ' '.join(result.stdout.split())
     for subcommand in ('campaign', 'tune', 'stress', 'review', 'recover', 'rosbag2-qos'):
@@ -58,7 +59,7 @@ def test_setup_venv_runs_pip_only_when_the_requirements_change(tmp_path):
 
     def setup(**env):
         return subprocess.run(['bash', str(ROOT / 'scripts' / 'setup_venv.sh'), str(venv), str(requirements)],
-                              capture_output=True, text=True, timeout=300,
+                              capture_output=True, text=True, timeout=HANG_TIMEOUT_S,
                               env={**os.environ, 'PYTHON': sys.executable, **env})
 
     first = setup()
@@ -86,9 +87,10 @@ def test_fly_sh_passes_every_subcommand_of_run_stack_on():
     assert {'campaign', 'tune', 'stress', 'review', 'recover', 'export', 'rosbag2-qos'} <= set(subcommands)
     for subcommand in subcommands:
         result = subprocess.run(['bash', str(ROOT / 'scripts' / 'fly.sh'), subcommand, '--help'], cwd=ROOT,
-                                capture_output=True, text=True)
+                                capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
         assert result.returncode == 0, (subcommand, result.stderr)
-        assert re.match(rf'usage: (run_stack\.py )?{re.escape(subcommand)} ', result.stdout), (subcommand, result.stdout)
+        usage = rf'usage: (run_stack\.py )?{re.escape(subcommand)} '
+        assert re.match(usage, result.stdout), (subcommand, result.stdout)
     flight = subprocess.run(['bash', str(ROOT / 'scripts' / 'fly.sh'), '--help'], cwd=ROOT, capture_output=True,
-                            text=True)
+                            text=True, timeout=HANG_TIMEOUT_S)
     assert flight.returncode == 0 and flight.stdout.startswith('usage: run_stack.py [-h]'), flight.stderr

@@ -13,6 +13,7 @@ from quad_msgs_bridge.bag.metadata import rosbag2_qos_overrides
 from quad_msgs_bridge.bag.writer import BagWriter
 from quad_msgs_bridge.contract import RECORDED_TOPICS
 from ros_support import ROOT
+from hang_guard import HANG_TIMEOUT_S
 
 
 def test_a_lone_vehicle_keeps_its_namespace_and_the_scenario():
@@ -63,7 +64,7 @@ def test_the_fleet_fails_when_one_vehicle_fails_and_the_table_names_it():
 ])
 def test_run_stack_refuses_a_bad_fleet_before_flying(arguments, message, tmp_path):
     done = subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), *arguments, '--out', str(tmp_path)],
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
     assert done.returncode == 2
     assert f'error: {message}' in done.stderr
     assert 'Traceback' not in done.stderr and not (tmp_path / 'bag').exists()

@@ -15,6 +15,7 @@ from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.writer import jazzy_typestore
 from quad_msgs_bridge.urdf import vehicle_urdf
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 PARAMS, DISTURBANCES = load_vehicle_file()
@@ -41,7 +42,7 @@ def test_run_stack_flies_records_and_reviews_an_embedded_fleet(tmp_path):
     out = tmp_path / 'fleet'
     done = subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), '--backend', 'embedded', '--vehicles', '2',
                            '--duration', '1', '--quiet', '--out', str(out)],
-                          capture_output=True, text=True, timeout=300, cwd=ROOT)
+                          capture_output=True, text=True, timeout=HANG_TIMEOUT_S, cwd=ROOT)
     assert done.returncode == 0, done.stderr
     assert 'uav1' in done.stdout and 'uav2' in done.stdout and 'result: OK' in done.stdout
     summary = json.loads((out / 'summary.json').read_text())

@@ -25,8 +25,10 @@ from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.review.command import main as review_main
 from quad_msgs_bridge.review.flight_from_bag import read_flight
 from quad_msgs_bridge.state import DPHI, DPSI, DTHETA, PHI, PSI, STATE_LAYOUT, STATE_NAMES, THETA
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from quad_sim.model import QuadrotorModel
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 FLY = ['--backend', 'embedded', '--quiet', '--scenario', 'hover']
@@ -102,7 +104,7 @@ def test_an_interrupted_flight_is_reviewed_as_interrupted_and_says_where(tmp_pat
             break
     time.sleep(1.0)
     process.send_signal(signal.SIGINT)
-    assert process.wait(timeout=60) == 130
+    assert process.wait(timeout=HANG_TIMEOUT_S) == 130
     [staging] = [folder for folder in tmp_path.iterdir() if STAGING_MARK in folder.name]
     flight = read_flight(staging / 'bag')
     assert flight.ended_early
@@ -128,7 +130,7 @@ def test_a_read_only_out_folder_is_refused_before_flying(tmp_path):
                    f"mount --bind '{folder}' '{folder}' && mount -o remount,ro,bind '{folder}' && exec {inner}"]
     else:
         folder.chmod(0o555)
-    result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
+    result = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
     assert result.returncode == 2, result.stderr
     assert result.stderr.startswith(f'error: --out: cannot write into {folder}')
     assert 'flying' not in result.stdout
@@ -150,7 +152,7 @@ def test_the_ros_backend_without_rclpy_is_refused_in_one_line_before_any_node_st
     script = ('import sys; sys.modules["rclpy"] = None\n'            # rclpy cannot be imported, as without ROS
               'import run_stack; sys.exit(run_stack.main(sys.argv[1:]))')
     result = subprocess.run([sys.executable, '-c', script, '--backend', 'ros', '--duration', '1', '--out',
-                             str(tmp_path / 'o_ros')], cwd=ROOT, capture_output=True, text=True, timeout=120)
+                             str(tmp_path / 'o_ros')], cwd=ROOT, capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
     assert result.returncode == 2
     assert result.stderr.count('\n') == 1 and result.stderr.startswith('error: --backend ros: rclpy cannot be '
                                                                        'imported')

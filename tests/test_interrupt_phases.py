@@ -18,10 +18,12 @@ import pytest
 from flight_stack.output import STAGING_MARK
 from quad_msgs_bridge.bag.reader import is_finalized, mcap_file
 from quad_msgs_bridge.review.flight_from_bag import read_flight
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
-PHASE_TIMEOUT = 600.0     #: [s] to reach a phase (a first compile on a loaded machine is slow)
-EXIT_TIMEOUT = 30.0       #: [s] from the signal to the exit, at most (bench/bench_interrupts.py: about 0.1 s)
+#: [s] to reach a phase, and from the signal to the exit: only a hang takes that long (a first compile on a loaded
+#: machine takes a minute; the exit about 0.1 s, bench/bench_interrupts.py measures it)
+PHASE_TIMEOUT = EXIT_TIMEOUT = HANG_TIMEOUT_S
 
 #: phase -> (the line the command prints on entering it, the options that make the phase last)
 PHASES = {
@@ -69,7 +71,7 @@ class Run:
         self.process.send_signal(number)
         self.process.wait(timeout=EXIT_TIMEOUT)
         elapsed = time.monotonic() - sent
-        while (line := self._queue.get(timeout=10.0)) is not None:
+        while (line := self._queue.get(timeout=HANG_TIMEOUT_S)) is not None:
             self.lines.append(line)
         return elapsed
 

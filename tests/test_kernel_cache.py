@@ -19,6 +19,7 @@ from numba.core.registry import CPUDispatcher
 
 from nnit2fsmc_controller import axis_laws
 from quad_msgs_bridge import kernel_cache
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE_DIRS = {'quad_msgs_bridge': ROOT / 'ros2_ws' / 'src' / 'quad_msgs_bridge',
@@ -167,7 +168,7 @@ def copy_of_the_packages(tree: Path) -> dict:
 
 def call_the_law(tree: Path, env: dict) -> dict:
     done = subprocess.run([sys.executable, '-c', LAW_CALL], cwd=tree, env=env, capture_output=True, text=True,
-                          timeout=600)
+                          timeout=HANG_TIMEOUT_S)
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout.strip().splitlines()[-1])
 

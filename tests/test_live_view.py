@@ -25,6 +25,7 @@ from quad_msgs_bridge.bag.metadata import read_metadata
 from quad_msgs_bridge.bag.reader import is_finalized, mcap_file
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 # 3 s of sim time at 1000 Hz control (controller.yaml: control_rate 1000.0): 3000 control steps
@@ -39,7 +40,7 @@ CONTRACT = {'/quad/odom': 'nav_msgs/msg/Odometry', '/quad/rotor_forces': 'std_ms
             '/tf': 'tf2_msgs/msg/TFMessage', '/quad/robot_description': 'std_msgs/msg/String',
             '/tf_static': 'tf2_msgs/msg/TFMessage'}
 SCENE_TOPIC = '/quad/scene'
-TIMEOUT = 30.0
+TIMEOUT = HANG_TIMEOUT_S      #: [s] for a message, a connection or the command to end: only a hang takes that long
 
 
 def message_data(frame: bytes) -> tuple[int, int, bytes]:
@@ -98,7 +99,7 @@ def live_flight(tmp_path_factory):
     process, url = start_live_flight(out, '--live-wait', '--speed-factor', '1')
     try:
         seen = watch_live_flight(url)
-        stdout, stderr = process.communicate(timeout=120)
+        stdout, stderr = process.communicate(timeout=HANG_TIMEOUT_S)
     finally:
         if process.poll() is None:
             process.kill()

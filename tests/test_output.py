@@ -6,7 +6,8 @@ import stat
 import pytest
 
 from flight_stack.output import STAGING_MARK, RunOutput
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
+from hang_guard import HANG_TIMEOUT_S
 
 
 def snapshot(folder):
@@ -190,12 +191,12 @@ def test_two_concurrent_flights_into_one_out_neither_is_lost(tmp_path):
                '--duration', '1', '--settle-time', '0.5', '--quiet', '--out', str(out), '--overwrite']
     first = subprocess.Popen(command + ['--seed', '1'], cwd=root, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                              text=True)
-    deadline = time.monotonic() + 120
+    deadline = time.monotonic() + HANG_TIMEOUT_S
     while not staging_folders(tmp_path) and first.poll() is None and time.monotonic() < deadline:
         time.sleep(0.005)
     assert staging_folders(tmp_path), 'the first flight never started writing'
-    second = subprocess.run(command + ['--seed', '2'], cwd=root, capture_output=True, text=True, timeout=300)
-    stdout, stderr = first.communicate(timeout=300)
+    second = subprocess.run(command + ['--seed', '2'], cwd=root, capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
+    stdout, stderr = first.communicate(timeout=HANG_TIMEOUT_S)
     assert first.returncode in (0, 1), stderr               # flown (1: its checks failed, still a complete run)
     assert second.returncode == 2, second.stderr
     assert f'error: --out: another run is writing {out} (process {first.pid})' in second.stderr, second.stderr

@@ -11,6 +11,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ('flight_stack', 'quad_msgs_bridge', 'quad_sim', 'nnit2fsmc_controller')
@@ -66,13 +67,13 @@ def installed(tmp_path_factory):
     tmp_path = tmp_path_factory.mktemp('pip-install')
     wheels = tmp_path / 'wheels'
     subprocess.run([*PIP, 'wheel', '--no-deps', '--wheel-dir', str(wheels), str(source_copy(tmp_path))],
-                   check=True, timeout=300)
+                   check=True, timeout=HANG_TIMEOUT_S)
     [wheel] = wheels.glob('*.whl')
     venv = tmp_path / 'venv'
-    subprocess.run([sys.executable, '-m', 'venv', '--without-pip', str(venv)], check=True, timeout=120)
+    subprocess.run([sys.executable, '-m', 'venv', '--without-pip', str(venv)], check=True, timeout=HANG_TIMEOUT_S)
     python = venv / 'bin' / 'python'
     subprocess.run([*PIP, '--python', str(python), 'install', '--no-compile', str(wheel), '-c', str(pinned(tmp_path))],
-                   check=True, timeout=600)
+                   check=True, timeout=HANG_TIMEOUT_S)
     return python, wheel
 
 
@@ -92,7 +93,7 @@ def test_the_wheel_holds_the_packages_and_their_configuration(installed):
 def test_every_module_imports_from_a_clean_environment(installed, tmp_path):
     python, _ = installed
     result = subprocess.run([str(python), '-c', IMPORT_ALL], cwd=tmp_path, capture_output=True, text=True,
-                            timeout=120, env={k: v for k, v in os.environ.items() if k != 'PYTHONPATH'})
+                            timeout=HANG_TIMEOUT_S, env={k: v for k, v in os.environ.items() if k != 'PYTHONPATH'})
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
     assert all('site-packages' in path for path in report['files']), report['files']   # not the clone
@@ -104,10 +105,11 @@ def test_the_console_script_flies_from_the_installed_files(installed, tmp_path):
     python, _ = installed
     command = python.parent / 'nnit2fsmc-stack'
     env = {k: v for k, v in os.environ.items() if k != 'PYTHONPATH'}
-    shown = subprocess.run([str(command), '--help'], cwd=tmp_path, capture_output=True, text=True, timeout=60, env=env)
+    shown = subprocess.run([str(command), '--help'], cwd=tmp_path, capture_output=True, text=True,
+                           timeout=HANG_TIMEOUT_S, env=env)
     assert shown.returncode == 0 and shown.stdout.startswith('usage: nnit2fsmc-stack'), shown.stderr
     flown = subprocess.run([str(command), '--backend', 'embedded', '--quiet', '--duration', '0.5', '--out', 'run'],
-                           cwd=tmp_path, capture_output=True, text=True, timeout=120, env=env)
+                           cwd=tmp_path, capture_output=True, text=True, timeout=HANG_TIMEOUT_S, env=env)
     assert flown.returncode == 0, flown.stderr
     assert json.loads((tmp_path / 'run' / 'summary.json').read_text())['control_steps'] == 500
     # matplotlib is an extra (pip install .[plots]): without it the review says how to get the plots

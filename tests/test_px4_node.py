@@ -6,6 +6,7 @@ import sys
 import pytest
 
 from ros_support import requires_ros
+from hang_guard import HANG_TIMEOUT_S
 
 pytestmark = [requires_ros, pytest.mark.ros]
 
@@ -18,7 +19,7 @@ def test_without_px4_msgs_the_node_says_so_in_one_line():
         pass
     from flight_stack.processes import source_tree_environment
     done = subprocess.run([sys.executable, '-m', 'quad_sim.px4_node'], env=source_tree_environment(),
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
     assert done.returncode == 1
     [line] = done.stderr.strip().splitlines()
     assert line.startswith('px4_bridge: px4_msgs cannot be imported') and 'docs/PX4.md' in line

@@ -16,6 +16,7 @@ import pytest
 
 from ros_support import (HAVE_RCLPY, ROS_WHEELS_VENV, describe_ros, node_process, odom_gate_once_matched,
                          requires_ros, ros_series, ros_wheels_python)
+from hang_guard import HANG_TIMEOUT_S
 
 WHEELS_PYTHON = ros_wheels_python()
 
@@ -106,7 +107,7 @@ def fly(node, namespace: str, on_wheels: set[str]) -> dict:
         # it sent is lost with its publishers
         take_until(subscriptions, lambda: (received['odom'] and received['odom'][-1][0] >= DURATION - 0.0015
                                            and received['wrench'] >= STEPS and received['clock'] >= STEPS),
-                   timeout=120.0)
+                   timeout=HANG_TIMEOUT_S)
     finally:
         codes = stop_all(processes)
         for taken in subscriptions + ([gate] if gate else []):

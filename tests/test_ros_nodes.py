@@ -16,6 +16,7 @@ from mcap.reader import make_reader
 
 from ros_support import (HAVE_RCLPY, HAVE_TF2_MSGS, ROOT, SKIP_REASON, cpu_hogs, importable, node_process,
                          odom_gate_once_matched, requires_ros, spin_until)
+from hang_guard import HANG_TIMEOUT_S
 
 pytestmark = [requires_ros, pytest.mark.ros]
 
@@ -59,7 +60,7 @@ def test_nodes_publish_the_contract_types_on_the_contract_names(ros_node):
                      {'duration': 2.0, 'initial_state': initial, 'wait_for_subscribers': 2}),
     ]
     try:
-        assert spin_until(ros_node, lambda: len(received) == len(published), timeout=30.0), \
+        assert spin_until(ros_node, lambda: len(received) == len(published), timeout=HANG_TIMEOUT_S), \
             f'only got {sorted(received)}'
         types = dict(ros_node.get_topic_names_and_types())
     finally:
@@ -174,12 +175,12 @@ def kill_a_controller_mid_flight(ros_node, arguments: list[str], namespace: str,
          '--out', str(out), '--quiet'],
         env=source_tree_environment(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        assert spin_until(ros_node, lambda: sim_time[0] >= 3.0, timeout=120.0), 'the flight never reached 3 s'
+        assert spin_until(ros_node, lambda: sim_time[0] >= 3.0, timeout=HANG_TIMEOUT_S), 'the flight never reached 3 s'
         found = subprocess.run(['pgrep', '-P', str(stack.pid), '-f', f'controller_node.*__ns:=/{namespace}( |$)'],
                                capture_output=True, text=True)
         [controller_pid] = found.stdout.split()
         os.kill(int(controller_pid), signal.SIGKILL)
-        output, _ = stack.communicate(timeout=120)
+        output, _ = stack.communicate(timeout=HANG_TIMEOUT_S)
     finally:
         if stack.poll() is None:
             stack.kill()
@@ -317,17 +318,18 @@ def test_the_fleet_simulator_waits_for_every_vehicle_and_repeats_a_step_only_to_
     late_reader = []
     try:
         assert spin_until(ros_node, lambda: odometry['a'] and odometry['b'] and all(
-            publisher.get_subscription_count() for publisher in forces.values()), timeout=30.0)
+            publisher.get_subscription_count() for publisher in forces.values()), timeout=HANG_TIMEOUT_S)
         forces['a'].publish(hover)
-        assert spin_until(ros_node, lambda: 'b: no rotor_forces' in '\n'.join(sim.lines), timeout=10.0)
+        assert spin_until(ros_node, lambda: 'b: no rotor_forces' in '\n'.join(sim.lines), timeout=HANG_TIMEOUT_S)
         spin_until(ros_node, lambda: False, timeout=0.7)      # two more input_timeouts: still nothing again
         after_timeout = {name: list(stamps) for name, stamps in odometry.items()}
         ros_node.create_subscription(kit[ODOM.type], '/pairing/b/odom',
                                      lambda msg: late_reader.append(msg.header.stamp.nanosec), qos_profile(ODOM.qos))
-        assert spin_until(ros_node, lambda: late_reader, timeout=10.0), 'the new reader never got the pending step'
+        assert spin_until(ros_node, lambda: late_reader, timeout=HANG_TIMEOUT_S), \
+            'the new reader never got the pending step'
         forces['b'].publish(hover)
         assert spin_until(ros_node, lambda: odometry['a'][-1] == 1_000_000 and odometry['b'][-1] == 1_000_000
-                          and clock[-1] == 1_000_000, timeout=10.0)
+                          and clock[-1] == 1_000_000, timeout=HANG_TIMEOUT_S)
     finally:
         codes = stop_all([sim])
     assert codes == {'sim': 0}
@@ -366,7 +368,7 @@ def test_tf2_sees_every_vehicle_of_a_fleet_at_its_odometry_pose(ros_node):
                                   {'vehicles': ['uav1', 'uav2'], 'duration': 3.0, 'wait_for_subscribers': 2,
                                    'initial_state': start + [start[0], start[1] + 3.0] + start[2:]}))
     try:
-        assert spin_until(ros_node, lambda: min(map(len, odometry.values())) >= 1000, timeout=60.0)
+        assert spin_until(ros_node, lambda: min(map(len, odometry.values())) >= 1000, timeout=HANG_TIMEOUT_S)
         found = {}
         for name, received in odometry.items():
             msg = received[900]     # 0.9 s into the flight, well after the listener's first transform
@@ -412,7 +414,7 @@ def test_without_tf2_msgs_the_simulator_says_so_once_and_flies_without_tf(ros_no
     executor.add_node(sim)
     executor.add_node(ros_node)
     try:
-        deadline = time.monotonic() + 30.0
+        deadline = time.monotonic() + HANG_TIMEOUT_S
         while not odometry and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         forces.publish(rotor_forces_msg(real, [1.0] * 4))
@@ -445,9 +447,9 @@ def test_goal_pose_is_flown_to_and_held(ros_node):
                      {'duration': 14.0, 'initial_state': start.initial_state, 'wait_for_subscribers': 2}),
     ]
     try:
-        assert spin_until(ros_node, lambda: latest and latest[-1].stamp >= 3.0, timeout=60.0)
+        assert spin_until(ros_node, lambda: latest and latest[-1].stamp >= 3.0, timeout=HANG_TIMEOUT_S)
         goal_pub.publish(pose_stamped_msg(kit, latest[-1].stamp, goal, 0.5))
-        assert spin_until(ros_node, lambda: latest[-1].stamp >= 13.9, timeout=120.0)
+        assert spin_until(ros_node, lambda: latest[-1].stamp >= 13.9, timeout=HANG_TIMEOUT_S)
     finally:
         codes = stop_all(processes)
     assert all(code == 0 for code in codes.values()), codes
@@ -467,7 +469,7 @@ def set_parameter(node, namespace: str, name: str, value: float):
     assert client.wait_for_service(timeout_sec=30.0), 'no set_parameters service'
     future = client.call_async(SetParameters.Request(
         parameters=[Parameter(name, Parameter.Type.DOUBLE, value).to_parameter_msg()]))
-    assert spin_until(node, future.done, timeout=30.0), f'no answer to setting {name}'
+    assert spin_until(node, future.done, timeout=HANG_TIMEOUT_S), f'no answer to setting {name}'
     node.destroy_client(client)
     return future.result().results[0]
 
@@ -521,7 +523,7 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
     ]
     try:
         odom_gate_once_matched(ros_node, [reader], namespace)
-        assert spin_until(ros_node, lambda: newest_odometry[0] >= 1.0e9, timeout=120.0), 'no flight'
+        assert spin_until(ros_node, lambda: newest_odometry[0] >= 1.0e9, timeout=HANG_TIMEOUT_S), 'no flight'
         set_at, asked = newest_odometry[0], time.time_ns()
         accepted = set_parameter(ros_node, namespace, 'common.lambda.z', 8.0)
         answered = time.time_ns()
@@ -530,7 +532,7 @@ def test_a_lambda_set_mid_flight_changes_the_surface_from_the_next_update_and_ke
         rate = set_parameter(ros_node, namespace, 'common.control_rate', 500.0)
         # the simulator says so once it has taken the answer to the last odometry: every answer is logged by then
         assert spin_until(ros_node, lambda: any('reached duration' in line for line in processes[2].lines),
-                          timeout=120.0), 'the flight never ended'
+                          timeout=HANG_TIMEOUT_S), 'the flight never ended'
     finally:
         codes = stop_all(processes)
     assert all(code == 0 for code in codes.values()), codes
@@ -579,7 +581,7 @@ def test_invalid_parameter_is_refused_at_start_naming_it(module, params, name):
     from flight_stack.processes import source_tree_environment
     from flight_stack.ros_backend import _ros_args
     done = subprocess.run([sys.executable, '-m', module] + _ros_args('bad', params), env=source_tree_environment(),
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
     assert done.returncode == 2, done.stdout + done.stderr
     assert f'parameter {name}' in done.stderr
     assert 'valid' in done.stderr
@@ -601,13 +603,13 @@ def test_non_finite_input_is_answered_with_finite_forces_and_the_bad_message_is_
     ]
     try:
         assert spin_until(ros_node, lambda: ros_node.count_subscribers(resolve(ODOM, namespace)) >= 1
-                          and ros_node.count_publishers(resolve(ROTOR_FORCES, namespace)) >= 1, timeout=30.0)
+                          and ros_node.count_publishers(resolve(ROTOR_FORCES, namespace)) >= 1, timeout=HANG_TIMEOUT_S)
         for k in range(1, 4):
             msg = odometry_msg(kit, odometry_from_state(k * 1e-3, hover.initial_state))
             if k == 2:
                 msg.pose.pose.position.z = math.nan
             odom_pub.publish(msg)
-            assert spin_until(ros_node, lambda: len(forces) == k, timeout=20.0), f'no answer to odometry {k}'
+            assert spin_until(ros_node, lambda: len(forces) == k, timeout=HANG_TIMEOUT_S), f'no answer to odometry {k}'
         # a simulator alone (its own namespace), answered with an inf force: it keeps its last valid
         # forces (zero: it stays on the ground)
         sim_namespace = 'nonfinite_sim'
@@ -617,11 +619,11 @@ def test_non_finite_input_is_answered_with_finite_forces_and_the_bad_message_is_
                                                qos_profile(ROTOR_FORCES.qos))
         sim = node_process('sim', 'quad_sim.sim_node', sim_namespace, {'wait_for_subscribers': 1})
         processes.append(sim)
-        assert spin_until(ros_node, lambda: odometry, timeout=30.0)
+        assert spin_until(ros_node, lambda: odometry, timeout=HANG_TIMEOUT_S)
         bad = rotor_forces_msg(kit, [1.0, 1.0, 1.0, 1.0])
         bad.data[1] = math.inf
         forces_pub.publish(bad)
-        assert spin_until(ros_node, lambda: len(odometry) >= 2, timeout=20.0)
+        assert spin_until(ros_node, lambda: len(odometry) >= 2, timeout=HANG_TIMEOUT_S)
     finally:
         codes = stop_all(processes)
     assert all(code == 0 for code in codes.values()), codes
@@ -714,8 +716,8 @@ def test_a_restarted_simulator_gets_a_fresh_controller_and_flies_the_same_flight
         for _ in range(2):
             sim = node_process('sim', 'quad_sim.sim_node', namespace,
                                {'duration': 1.0, 'exit_at_end': True, 'initial_state': start, 'wait_for_subscribers': 2})
-            assert sim.process.wait(timeout=60) == 0, '\n'.join(sim.lines)
-            assert spin_until(ros_node, lambda: samples and samples[-1].stamp >= 0.999, timeout=10.0)
+            assert sim.process.wait(timeout=HANG_TIMEOUT_S) == 0, '\n'.join(sim.lines)
+            assert spin_until(ros_node, lambda: samples and samples[-1].stamp >= 0.999, timeout=HANG_TIMEOUT_S)
             flights.append(samples[:])
             samples.clear()
     finally:
@@ -732,7 +734,8 @@ def rosbag2_available() -> bool:
     """``ros2 bag`` (rosbag2 with its MCAP storage plugin) is installed in the sourced ROS 2."""
     if not HAVE_RCLPY or shutil.which('ros2') is None:
         return False
-    return subprocess.run(['ros2', 'bag', 'record', '--help'], capture_output=True, timeout=60).returncode == 0
+    return subprocess.run(['ros2', 'bag', 'record', '--help'], capture_output=True,
+                          timeout=HANG_TIMEOUT_S).returncode == 0
 
 
 @pytest.mark.skipif(not rosbag2_available(), reason=SKIP_REASON if not HAVE_RCLPY else
@@ -764,7 +767,7 @@ def test_ros2_bag_reads_our_bag_and_our_review_reads_a_ros2_bag_recording_of_the
                 topics=[t.name for t in FLOWN_TOPICS], settle_time=settle, quiet=True, extra_odom_subscribers=1))
         finally:
             ros2_bag.send_signal(signal.SIGINT)
-            log, _ = ros2_bag.communicate(timeout=60)
+            log, _ = ros2_bag.communicate(timeout=HANG_TIMEOUT_S)
     assert result.failed_node is None, result
     assert ros2_bag.returncode == 0, log
 
@@ -772,7 +775,7 @@ def test_ros2_bag_reads_our_bag_and_our_review_reads_a_ros2_bag_recording_of_the
     # every message of the flight in our bag, and in rosbag2's every message of the topics with a recorder-proof
     # history (/tf keeps tf2's depth of 100, so rosbag2 may lose some of it on a loaded machine; docs/ROS.md)
     for bag, topics in ((ours, FLOWN_TOPICS), (theirs, [t for t in FLOWN_TOPICS if t is not TF])):
-        info = subprocess.run(['ros2', 'bag', 'info', str(bag)], capture_output=True, text=True, timeout=60)
+        info = subprocess.run(['ros2', 'bag', 'info', str(bag)], capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
         assert info.returncode == 0, info.stderr
         for topic in topics:
             count = 1 if topic.qos.durability == 'transient_local' else steps
@@ -803,7 +806,7 @@ def test_the_recorder_logs_in_sim_time_from_the_start(ros_node, tmp_path):
                             {'bag': str(tmp_path / 'bag'), 'topics': ['rotor_forces', '/clock']})
     try:
         assert spin_until(ros_node, lambda: forces_pub.get_subscription_count() and clock_pub.get_subscription_count(),
-                          timeout=30.0)
+                          timeout=HANG_TIMEOUT_S)
         forces_pub.publish(rotor_forces_msg(kit, [1.0, 1.0, 1.0, 1.0]))
         spin_until(ros_node, lambda: False, timeout=0.5)
         clock_pub.publish(clock_msg(kit, 2.5))

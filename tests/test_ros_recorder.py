@@ -13,6 +13,7 @@ from mcap.reader import make_reader
 from rosbags.highlevel import AnyReader
 
 from ros_support import HAVE_RCLPY, node_process, requires_ros, spin_until
+from hang_guard import HANG_TIMEOUT_S
 
 pytestmark = [requires_ros, pytest.mark.ros]
 
@@ -92,16 +93,16 @@ def test_a_recorded_flight_holds_exactly_the_bytes_that_were_published(ros_node,
     others = [name for name, topic in resolve_all(topics, ['/' + namespace])
               if topic.qos.durability == 'volatile' and topic is not ODOM]
     assert spin_until(ros_node, lambda: all(reader.get_publisher_count() for name in others
-                                            for reader in readers[name]), timeout=180.0)
+                                            for reader in readers[name]), timeout=HANG_TIMEOUT_S)
     subscribe(f'/{namespace}/odom', ODOM)
-    spin_until(ros_node, lambda: not flight.is_alive(), timeout=300.0)
+    spin_until(ros_node, lambda: not flight.is_alive(), timeout=HANG_TIMEOUT_S)
     flight.join()
     steps = round(duration * 1000)
     odom = f'/{namespace}/odom'
     per_step = [name for name, _ in resolve_all(PER_STEP, ['/' + namespace])]
     per_step += ['/tf'] if '/tf' in sent else []     # one transform message per step too, where TF exists
     spin_until(ros_node, lambda: min(len(got[name]) for got in (sent, decoded) for name in per_step) >= steps,
-               timeout=10.0)
+               timeout=HANG_TIMEOUT_S)
     [flown] = result
     assert flown.failed_node is None, flown
 
@@ -157,13 +158,13 @@ def test_a_killed_recorder_leaves_a_readable_prefix_of_the_flight(tmp_path):
     processes = recorded_hover(namespace, bag, {'duration': 600.0, 'wait_for_subscribers': 2})
     recorder = processes[0]
     try:
-        deadline = time.monotonic() + 180.0
+        deadline = time.monotonic() + HANG_TIMEOUT_S
         while time.monotonic() < deadline and mcap_size(bag) < 2 ** 20:   # chunks of 1 MiB before compression
             assert recorder.returncode is None, '\n'.join(recorder.lines)
             time.sleep(0.2)
         assert mcap_size(bag) >= 2 ** 20, 'the recording did not grow'
         recorder.process.kill()
-        assert recorder.process.wait(timeout=10.0) == -9
+        assert recorder.process.wait(timeout=HANG_TIMEOUT_S) == -9
     finally:
         codes = stop_all(processes[1:])
     assert all(code == 0 for code in codes.values()), codes
@@ -205,13 +206,13 @@ def test_a_recorder_behind_at_the_end_of_a_flight_still_gets_every_step(ros_node
                                                 'wait_for_subscribers': 3})
     recorder, sim = processes[0], processes[3]
     try:
-        assert spin_until(ros_node, lambda: first_step, timeout=180.0), '\n'.join(sim.lines)
+        assert spin_until(ros_node, lambda: first_step, timeout=HANG_TIMEOUT_S), '\n'.join(sim.lines)
         recorder.process.send_signal(signal.SIGSTOP)
-        assert wait_for_line(sim, 'reached duration', 120.0), '\n'.join(sim.lines)
+        assert wait_for_line(sim, 'reached duration', HANG_TIMEOUT_S), '\n'.join(sim.lines)
         time.sleep(3.0)                                  # longer than a node stopped by a signal waits
         assert sim.returncode is None, 'the simulator left before the recorder acknowledged its last steps'
         recorder.process.send_signal(signal.SIGCONT)
-        assert sim.process.wait(timeout=60.0) == 0, '\n'.join(sim.lines)
+        assert sim.process.wait(timeout=HANG_TIMEOUT_S) == 0, '\n'.join(sim.lines)
     finally:
         recorder.process.send_signal(signal.SIGCONT)
         codes = stop_all(processes[1:])                  # the recorder last, as flight_stack.ros_backend does:

@@ -21,6 +21,7 @@ from quad_msgs_bridge.bag.metadata import read_metadata
 from quad_msgs_bridge.bag.reader import is_finalized, mcap_file
 from quad_msgs_bridge.review.metrics import default_settle_time
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 PARAMS, DISTURBANCES = load_vehicle_file()
@@ -228,7 +229,8 @@ def run_without(module: str, *args: str) -> subprocess.CompletedProcess:
     """run_stack.py in a Python where ``module`` cannot be imported (as outside the virtual environment)."""
     code = (f'import runpy, sys; sys.modules[{module!r}] = None; sys.argv = ["run_stack.py", *{list(args)!r}]; '
             'runpy.run_path("run_stack.py", run_name="__main__")')
-    return subprocess.run([sys.executable, '-c', code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    return subprocess.run([sys.executable, '-c', code], cwd=ROOT, capture_output=True, text=True,
+                          timeout=HANG_TIMEOUT_S)
 
 
 def test_help_works_without_the_bag_libraries():

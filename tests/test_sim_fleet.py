@@ -6,11 +6,13 @@ from pathlib import Path
 
 import pytest
 
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from quad_msgs_bridge.contract import vehicle_namespaces
 from quad_sim.fleet import Fleet, LockstepAnswers, split_initial_states
 from quad_sim.model import QuadrotorModel
 from quad_sim.simulator import Simulator
+from hang_guard import HANG_TIMEOUT_S
 
 PARAMS, DISTURBANCES = load_vehicle_file()
 
@@ -107,6 +109,6 @@ def test_compile_kernels_builds_the_step_and_odometry_kernels_before_the_first_s
     root = Path(__file__).resolve().parent.parent
     paths = [str(root / 'ros2_ws' / 'src' / package) for package in ('quad_msgs_bridge', 'quad_sim')]
     result = subprocess.run([sys.executable, '-c', COMPILED_KERNELS, *paths], capture_output=True, text=True,
-                            timeout=300, check=True)
+                            timeout=HANG_TIMEOUT_S, check=True)
     before, after = json.loads(result.stdout)
     assert before == [0, 0] and all(count >= 1 for count in after)

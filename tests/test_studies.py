@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from flight_stack.studies import cli
+from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent
 STUDIES = sorted(path.stem.replace('_', '-') for path in (ROOT / 'flight_stack' / 'studies').glob('*.py')
@@ -15,7 +16,7 @@ STUDIES = sorted(path.stem.replace('_', '-') for path in (ROOT / 'flight_stack' 
 
 def study(*argv):
     return subprocess.run([sys.executable, str(ROOT / 'run_stack.py'), 'study', *argv], capture_output=True,
-                          text=True, timeout=120)
+                          text=True, timeout=HANG_TIMEOUT_S)
 
 
 def test_the_list_names_every_study_module_with_its_table_and_doc():

@@ -12,6 +12,7 @@ import distributed
 import numpy as np
 import pytest
 import yaml
+from hang_guard import HANG_TIMEOUT_S
 
 from flight_stack.campaign.results import read_flights, wilson_interval
 from flight_stack.campaign.runner import RunOptions, run_campaign
@@ -23,7 +24,8 @@ from flight_stack.campaign.stress import (KINDS, BreakingPoint, StressSetup, Tal
 from flight_stack.campaign.tune import TuneSetup, objective, tune
 from nnit2fsmc_controller.factory import build_controller, load_gains
 from nnit2fsmc_controller.search_spaces import SEARCH_SPACES, search_space, values_in, with_values
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 DOCUMENT = {'scenario': 'paper', 'duration': 2.0, 'settle_time': 1.2, 'controllers': ['pid'], 'flights': 3,
             'seed': 0, 'control_rate_hz': 250, 'physics_rate_hz': 500,
@@ -340,7 +342,7 @@ def test_ctrl_c_in_tune_says_how_to_continue_in_one_line_and_exits_130(tmp_path)
               'tune.fly_point = interrupted\n'
               'from flight_stack.cli import main\n'
               f'sys.exit(main(["tune", {str(spec)!r}, "--controller", "pid", "--trials", "2", "--out", {str(out)!r}]))\n')
-    result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True)
+    result = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True, timeout=HANG_TIMEOUT_S)
     assert result.returncode == 130, result.stderr
     lines = result.stderr.splitlines()
     assert lines[-1] == (f'interrupted; run the same command again to continue the study in {out} (the interrupted '
