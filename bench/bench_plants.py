@@ -23,7 +23,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 
 import flight_stack  # noqa: E402,F401  (puts the three ROS package folders on the path)
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file  # noqa: E402
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file  # noqa: E402
 from quad_sim.plants import PLANTS, make_plant  # noqa: E402
 
 

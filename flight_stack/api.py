@@ -35,7 +35,8 @@ from nnit2fsmc_controller.trajectory import SCENARIOS
 from quad_msgs_bridge.reference import ReferenceSample as Reference, hold
 from quad_msgs_bridge.review.flight_data import Flight
 from quad_msgs_bridge.review.flight_from_bag import read_flight
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
 __all__ = ['CONTROLLERS', 'SCENARIOS', 'CascadedController', 'ControlOutput', 'ControllerKind', 'Flight', 'Gain',
            'ParameterError', 'Reference', 'SE3Controller', 'VehicleParams', 'fly', 'hold', 'load_gains',

@@ -156,7 +156,7 @@ def choose_backend(requested: str, live: bool) -> str:
 
 def check_count(option: str, value: int, low: int, high: int) -> int:
     """``value`` if it is a whole number in [low, high], else a ParameterError naming ``option`` and the range."""
-    from quad_msgs_bridge.vehicle_params import ParameterError
+    from quad_msgs_bridge.validation import ParameterError
     if not low <= value <= high:
         raise ParameterError(f'{option}: {value} is outside the valid range {low} to {high} (a whole number)')
     return value
@@ -165,7 +165,7 @@ def check_count(option: str, value: int, low: int, high: int) -> int:
 def check_backend_options(args, backend: str) -> None:
     """The ROS backend can be started (rclpy imports), and no option of the other backend is given: each
     refused with a ParameterError naming it, before anything starts. Sets the ROS options' defaults."""
-    from quad_msgs_bridge.vehicle_params import ParameterError
+    from quad_msgs_bridge.validation import ParameterError
     if backend == 'ros':
         try:
             import rclpy  # noqa: F401
@@ -186,7 +186,7 @@ def check_backend_options(args, backend: str) -> None:
 
 def check_live_options(args, backend: str) -> float:
     """The speed factor of an embedded flight (0: as fast as it can), after checking the live-view options."""
-    from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+    from quad_msgs_bridge.validation import ParameterError, check_number
     if backend == 'ros':
         if args.live:
             raise ParameterError('--live serves the embedded flight; for the ROS backend use Foxglove\'s ROS 2 '
@@ -291,7 +291,7 @@ def run(argv: list[str]) -> int:
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
     from nnit2fsmc_controller.factory import choose_controller
-    from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+    from quad_msgs_bridge.validation import ParameterError, check_number
     try:
         args.controller = choose_controller(args.controller, args.gains)
         plan = plan_flight(args.controller, args.scenario, duration=args.duration, disturbances=args.disturbances,

@@ -26,28 +26,12 @@ from quad_msgs_bridge.runtime import freeze_long_lived_objects
 from quad_msgs_bridge.state import OdometrySample, odometry_from_state, state_from_odometry
 from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 from quad_sim.plants import DEFAULT_PLANT, make_plant
-from quad_sim.perturbations.actuation import MotorLag, TransportDelay
-from quad_sim.perturbations.sensor_noise import SensorNoise
-from quad_sim.perturbations.vehicle_change import VehicleChange
-from quad_sim.perturbations.wind import Wind
 from quad_sim.simulator import Simulator
+from quad_sim.world import Perturbations
 from nnit2fsmc_controller.factory import build_controller, build_measurement_stage
 
 from .closed_loop import FAILURES, ClosedLoop, FailureRules
 from .interrupts import deferred
-
-
-@dataclass
-class Perturbations:
-    """What makes a flight differ from the nominal one (for one vehicle, or a batch: then arrays
-    and per-vehicle random streams). Left at None, a part is off."""
-
-    true_vehicle: VehicleParams | None = None   #: the vehicle the simulator flies (default: the nominal one)
-    sensor_noise: SensorNoise | None = None
-    delay: TransportDelay | None = None
-    motor_lag: MotorLag | None = None
-    wind: Wind | None = None
-    changes: tuple[VehicleChange, ...] = ()     #: the true vehicle changing mid-flight (payload, rotor loss)
 
 
 @dataclass

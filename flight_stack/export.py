@@ -76,7 +76,7 @@ def export_flight(bag: str | Path, out: str | Path, file_format: str | None = No
     by the suffix of ``out``, else csv); the path written. ValueError (ParameterError, BagReadError) on bad
     input, ImportError without pyarrow for Parquet; both before anything is written."""
     from quad_msgs_bridge.review.flight_from_bag import read_flight
-    from quad_msgs_bridge.vehicle_params import ParameterError
+    from quad_msgs_bridge.validation import ParameterError
     out = Path(out)
     file_format = file_format or ('parquet' if out.suffix == '.parquet' else 'csv')
     if file_format not in FORMATS:

@@ -48,7 +48,7 @@ def main(argv: list[str]) -> int:
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument('what', choices=WHAT)
     args = parser.parse_args(argv)
-    from quad_msgs_bridge.vehicle_params import ParameterError
+    from quad_msgs_bridge.validation import ParameterError
     try:
         listed = rows(args.what)
     except ParameterError as error:

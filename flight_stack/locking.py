@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 from typing import Callable
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from .interrupts import deferred
 

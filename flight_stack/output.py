@@ -26,7 +26,7 @@ import secrets
 import shutil
 from pathlib import Path
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from .locking import FileLock
 

@@ -17,11 +17,11 @@ from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.flight_bag import select_topics
 from quad_msgs_bridge.contract import TopicSpec
 from quad_msgs_bridge.review.metrics import default_settle_time
-from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams, check_number, load_vehicle_file
-from quad_sim.perturbations.vehicle_change import VehicleChange, vehicle_change
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams, load_vehicle_file
 from quad_sim.plants import DEFAULT_PLANT, check_plant, check_plant_installed
+from quad_sim.world import Perturbations, build_perturbations, parse_world, vehicle_changes, wind_direction
 
-from .embedded import Perturbations
 
 MAX_SEED = 2 ** 31 - 1      #: largest NN seed (a ROS integer parameter of the recorder)
 
@@ -47,10 +47,6 @@ class FlightPlan:
     plant: str = DEFAULT_PLANT   #: what the simulator flies (quad_sim.plants.PLANTS)
 
 
-#: the keys of fly()'s mid-flight vehicle changes -> (VehicleParams field, how to check the value)
-CHANGE_KEYS = {'mass_change': ('mass_kg', 'm'), 'rotor_efficiency_loss': ('loss', 'rotor_efficiency_loss')}
-
-
 def _vehicle(argument: str, value) -> VehicleParams:
     """A VehicleParams, or the vehicle of a vehicle YAML path (None: the packaged one)."""
     if isinstance(value, VehicleParams):
@@ -63,70 +59,31 @@ def _vehicle(argument: str, value) -> VehicleParams:
         raise ParameterError(f'{argument}: {error}') from error
 
 
-def _changes(true_vehicle: VehicleParams, events: dict, duration: float) -> tuple[VehicleChange, ...]:
-    """The true vehicle's changes of ``events`` (argument -> {'at_s': t, value key: value}), each applied on
-    top of the earlier ones; each must happen within the flight's ``duration`` [s]."""
-    timed = []
-    for argument, event in events.items():
-        key, field_name = CHANGE_KEYS[argument]
-        if not isinstance(event, Mapping):
-            raise ParameterError(f'{argument}: expected a mapping {{at_s: t, {key}: value}}, got {event!r}')
-        for name in event:
-            if name not in ('at_s', key):
-                raise ParameterError(f'{argument}.{name}: unknown key (valid keys: at_s, {key})')
-        for name in ('at_s', key):
-            if name not in event:
-                raise ParameterError(f'{argument}.{name}: missing')
-        value = event[key]
-        if field_name == 'rotor_efficiency_loss':
-            if isinstance(value, (str, bytes)) or not isinstance(value, Sequence) or len(value) != 4:
-                raise ParameterError(f'{argument}.{key}: expected 4 lost fractions in [0, 1) of F1..F4, '
-                                     f'got {value!r}')
-            value = tuple(value)
-        at_s = check_number(f'{argument}.at_s', event['at_s'], 0.0)
-        if at_s >= duration:
-            raise ParameterError(f'{argument}.at_s: {at_s:g} s is not before the end of the {duration:g} s flight, so '
-                                 f'the change would never happen (valid: 0 <= at_s < {duration:g})')
-        timed.append((at_s, argument, field_name, value))
-    changes, vehicle = [], true_vehicle
-    for at_s, argument, field_name, value in sorted(timed, key=lambda event: event[0]):
-        change = vehicle_change(argument, vehicle, at_s, **{field_name: value})
-        vehicle = change.vehicle
-        changes = [c for c in changes if c.at_s != at_s] + [change]    # one time: the later event includes it
-    return tuple(changes)
-
-
-def plan_perturbations(scenario: str, controller: str, seed: int, duration: float, control_rate: float,
-                       physics_rate: float, nominal: VehicleParams, *, true_vehicle=None,
-                       wind: Mapping | None = None, sensor_noise: Mapping | None = None, delay_s: float = 0.0,
-                       motor_time_constant_s: float = 0.0, mass_change: Mapping | None = None,
+def plan_perturbations(seed: int, duration: float, control_rate: float, physics_rate: float,
+                       nominal: VehicleParams, *, true_vehicle=None, wind: Mapping | None = None,
+                       sensor_noise: Mapping | None = None, delay_s: float = 0.0, motor_time_constant_s: float = 0.0,
+                       mass_change: Mapping | None = None,
                        rotor_efficiency_loss: Mapping | None = None) -> Perturbations | None:
-    """The world of one flight, None when it is the nominal one.
+    """The world of one flight (quad_sim.world), None when it is the nominal one.
 
-    ``wind``, ``sensor_noise``, ``delay_s`` and ``motor_time_constant_s`` mean what the campaign spec's keys
-    of those names mean and are checked by the same code (``flight_stack.campaign.spec``: a wind without
+    ``wind``, ``sensor_noise``, ``delay_s`` and ``motor_time_constant_s`` are the world's keys, as a campaign
+    spec writes them and checked by the same code (:func:`quad_sim.world.parse_world`: a wind without
     ``direction_deg`` blows in a direction drawn from the flight's stream); the random streams are those of
-    flight 0 of a campaign with seed ``seed``. ``true_vehicle`` (a VehicleParams or a vehicle YAML; None:
-    the nominal one) is what the simulator flies; ``mass_change`` ``{at_s: t, mass_kg: m}`` and
-    ``rotor_efficiency_loss`` ``{at_s: t, loss: [l1, l2, l3, l4]}`` change it from sim time t [s] on.
+    flight 0 of seed ``seed``. ``true_vehicle`` (a VehicleParams or a vehicle YAML; None: the nominal one)
+    is what the simulator flies; ``mass_change`` ``{at_s: t, mass_kg: m}`` and ``rotor_efficiency_loss``
+    ``{at_s: t, loss: [l1, l2, l3, l4]}`` change it from sim time t [s] on, before ``duration`` [s].
     ParameterError names the argument (and its key).
     """
-    from .campaign.sampling import build_perturbations, sample_conditions
-    from .campaign.spec import parse_spec
-    world = {'wind': wind, 'sensor_noise': sensor_noise, 'delay_s': delay_s,
-             'motor_time_constant_s': motor_time_constant_s}
-    document = {'scenario': scenario, 'duration': duration, 'settle_time': 0.0, 'controllers': [controller],
-                'flights': 1, 'seed': seed, **{key: value for key, value in world.items() if value is not None}}
-    spec = parse_spec(document)
+    world = parse_world({'wind': wind, 'sensor_noise': sensor_noise, 'delay_s': delay_s,
+                         'motor_time_constant_s': motor_time_constant_s})
     true = nominal if true_vehicle is None else _vehicle('true_vehicle', true_vehicle)
     events = {key: value for key, value in (('mass_change', mass_change),
                                             ('rotor_efficiency_loss', rotor_efficiency_loss)) if value is not None}
-    changes = _changes(true, events, duration)
-    if true_vehicle is None and not changes and not (spec.has_wind or spec.sensor_noise or spec.delay_s
-                                                     or spec.motor_time_constant_s):
+    changes = vehicle_changes(true, events, duration)
+    if true_vehicle is None and not changes and world.is_nominal:
         return None
-    conditions = replace(sample_conditions(spec, true, 0), vehicle=true)
-    perturbations = build_perturbations(spec, [conditions], 1.0 / control_rate, 1.0 / physics_rate, batch=False)
+    perturbations = build_perturbations(world, seed, [0], [true], [wind_direction(world, seed, 0)],
+                                        1.0 / control_rate, 1.0 / physics_rate, batch=False)
     return replace(perturbations, changes=changes)
 
 
@@ -208,7 +165,7 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
         raise ParameterError(f'--duration: {duration:g} s is shorter than two control steps ({2.0 / control_rate:g} s '
                              f'at common.control_rate {control_rate:g} Hz), so nothing would be flown or measured')
     physics_rate = check_physics_rate(physics_rate, control_rate)
-    perturbations = plan_perturbations(scenario, controller, seed, duration, control_rate, physics_rate, params,
+    perturbations = plan_perturbations(seed, duration, control_rate, physics_rate, params,
                                        **world)
     return FlightPlan(
         controller=controller, scenario=scenario, trajectory=trajectory, params=params,

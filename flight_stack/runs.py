@@ -226,7 +226,7 @@ def run_flight(controller: str, scenario: str, *, out=None, overwrite: bool = Fa
     from flight_stack.output import RunOutput
     from flight_stack.plan import plan_flight
     from flight_stack.summary import write_summary
-    from quad_msgs_bridge.vehicle_params import ParameterError
+    from quad_msgs_bridge.validation import ParameterError
     plan = plan_flight(controller, scenario, vehicle_file=vehicle, gains_file=gains, **settings)
     if out is not None and (not isinstance(out, (str, Path)) or not str(out).strip()):
         raise ParameterError(f'out: expected a folder path (None: write nothing; \'.\': the current folder), got '

@@ -14,7 +14,8 @@ from flight_stack.embedded import published_path, setpoint_path
 from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, build_measurement_stage, load_gains
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.reference import hold
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from quad_sim.model import QuadrotorModel
 from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
 from quad_sim.simulator import Simulator

@@ -19,7 +19,7 @@ from flight_stack.campaign.results import read_flights, wilson_interval
 from flight_stack.campaign.runner import RunOptions, run_campaign
 from flight_stack.campaign.spec import parse_spec
 from nnit2fsmc_controller.factory import load_gains
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 from hang_guard import HANG_TIMEOUT_S
 
 ROOT = Path(__file__).resolve().parent.parent

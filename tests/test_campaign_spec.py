@@ -9,7 +9,8 @@ import yaml
 
 from flight_stack.campaign.sampling import VEHICLE_DRAWS, sample_conditions
 from flight_stack.campaign.spec import Distribution, load_spec, parse_spec
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = ROOT / 'campaigns' / 'paper-robustness.yaml'

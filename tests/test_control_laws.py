@@ -23,7 +23,8 @@ from nnit2fsmc_controller.tuning import retune
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.review.metrics import flight_metrics
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 PAPER_VEHICLE, DISTURBANCES = load_vehicle_file()
 VEHICLE = dataclasses.replace(PAPER_VEHICLE, Ix=3.1e-3, Iy=4.7e-3, Iz=8.3e-3, Kfx=2.1e-3, Kfy=3.7e-3, Kfz=5.3e-3,

@@ -16,7 +16,8 @@ from quad_msgs_bridge.frames import rotation_from_euler
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.reference import ReferenceSample, hold
 from quad_msgs_bridge.state import DPHI, DPSI, DTHETA, VX, VY, VZ
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from vehicle_support import ASYMMETRIC, paper_eq1
 from hang_guard import HANG_TIMEOUT_S
 

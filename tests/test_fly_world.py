@@ -1,7 +1,10 @@
 """fly() with any vehicle and any world: a true vehicle apart from the nominal model, wind, sensor noise, delay,
 motor lag, a mass change and a rotor efficiency loss from a time t, checked as the campaign spec checks them."""
 import math
+import subprocess
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,6 +20,7 @@ from quad_sim.perturbations.streams import flight_streams
 from quad_sim.perturbations.vehicle_change import VehicleChange
 from quad_sim.perturbations.wind import Wind
 
+ROOT = Path(__file__).resolve().parent.parent
 NOMINAL = load_vehicle()
 TRUE = replace(NOMINAL, m=1.1 * NOMINAL.m, Kfx=1.2 * NOMINAL.Kfx)
 PICKED_UP = 1.3 * NOMINAL.m           #: [kg] after the payload is picked up
@@ -99,3 +103,16 @@ def test_a_rotor_efficiency_loss_from_a_time_on_and_the_other_perturbations_fly(
 def test_every_bad_input_is_a_value_error_naming_the_argument(setting, named, tmp_path):
     with pytest.raises(ValueError, match=named):
         fly(**{'scenario': 'hover', 'duration': 3.0, **setting})
+
+
+def test_a_single_flight_reaches_its_world_without_the_campaign_package():
+    """The world is described once, below both (quad_sim.world): a flight under wind, noise, delay, motor lag and a
+    mid-flight change plans and flies without importing flight_stack.campaign."""
+    script = ("import sys, flight_stack.api as api\n"
+              "api.fly('pid', 'hover', duration=1.0, settle_time=0.5, wind={'mean_speed_mps': 2.0, 'turbulence': 'light'},"
+              " sensor_noise={'position_m': 0.01}, delay_s=0.002, motor_time_constant_s=0.02,"
+              " mass_change={'at_s': 0.5, 'mass_kg': 0.6})\n"
+              "print(sorted(m for m in sys.modules if m.startswith('flight_stack.campaign')))\n")
+    done = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True, cwd=ROOT)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == '[]'

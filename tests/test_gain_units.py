@@ -17,7 +17,8 @@ from flight_stack.api import fly
 from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, flatten_gains, gain_names, load_gains, \
     unflatten_gains
 from nnit2fsmc_controller.gain_units import GAIN_UNITS, UNITS, control_scale, gain_unit, in_vehicle_units
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
 PARAMS = load_vehicle_file()[0]
 #: what the packaged file gave the packaged vehicle when it was written in newtons (z: N; phi, theta: N; psi: N m),

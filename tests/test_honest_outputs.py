@@ -25,7 +25,8 @@ from quad_msgs_bridge.reference import ReferenceSample
 from quad_msgs_bridge.review.command import main as review_main
 from quad_msgs_bridge.review.flight_from_bag import read_flight
 from quad_msgs_bridge.state import DPHI, DPSI, DTHETA, PHI, PSI, STATE_LAYOUT, STATE_NAMES, THETA
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from quad_sim.model import QuadrotorModel
 from hang_guard import HANG_TIMEOUT_S
 

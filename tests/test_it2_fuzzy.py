@@ -8,7 +8,7 @@ import pytest
 pyit2fls = pytest.importorskip('pyit2fls')
 
 from nnit2fsmc_controller.it2_fuzzy import CONSEQUENTS, RULES, IT2FuzzyCorrector  # noqa: E402
-from quad_msgs_bridge.vehicle_params import ParameterError  # noqa: E402
+from quad_msgs_bridge.validation import ParameterError
 
 SCALE = 0.7          # input_scale [units of S]: the universe of S is [-0.7, 0.7]
 HEIGHT = 0.6         # lower membership height (the packaged default)

@@ -6,7 +6,7 @@ import stat
 import pytest
 
 from flight_stack.output import STAGING_MARK, RunOutput
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 from hang_guard import HANG_TIMEOUT_S
 
 

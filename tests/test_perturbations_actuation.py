@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 from quad_sim.perturbations import MotorLag, TransportDelay
 
 

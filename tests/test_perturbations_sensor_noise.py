@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from quad_msgs_bridge.frames import rotation_from_euler
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 from quad_sim.perturbations import BLOCK_STEPS, SensorErrors, SensorNoise, flight_streams
 
 STATE = [1.0, -2.0, 3.0, 0.5, -0.25, 0.1, 0.3, -0.4, 2.0, 0.7, -0.2, 1.1]

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 from quad_sim.perturbations import BLOCK_STEPS, FlightStreams, SensorErrors, SensorNoise, Wind, flight_streams
 from quad_sim.perturbations.streams import REFILL_CHUNK, StandardNormals
 

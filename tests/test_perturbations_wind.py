@@ -6,7 +6,7 @@ import pytest
 import scipy.linalg
 import scipy.signal
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 from quad_sim.perturbations import BLOCK_STEPS, DrydenTurbulence, Wind, flight_streams, low_altitude_scales
 from quad_sim.perturbations.wind import first_order_step, second_order_step
 

@@ -5,7 +5,8 @@ import math
 import pytest
 
 from quad_msgs_bridge import px4
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from quad_sim.px4_offboard import (ARMING_STATE_ARMED, ARMING_STATE_DISARMED, NAVIGATION_STATE_AUTO_LAND,
                                    NAVIGATION_STATE_OFFBOARD, VEHICLE_CMD_COMPONENT_ARM_DISARM, VEHICLE_CMD_DO_SET_MODE,
                                    VEHICLE_CMD_NAV_LAND, OffboardConfig, OffboardCore, Phase, Px4Status)

@@ -11,7 +11,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
 HAS_TORCH = all(importlib.util.find_spec(name) is not None for name in ('torch', 'torchdiffeq', 'roma', 'rotorpy'))
 needs_torch = pytest.mark.skipif(not HAS_TORCH, reason='torch, torchdiffeq or roma is not installed (pip install -r '

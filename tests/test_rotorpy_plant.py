@@ -12,7 +12,8 @@ from quad_msgs_bridge.frames import body_rates_from_euler_rates
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.rotorpy_conversion import (HUMMINGBIRD, aero_coefficients, motor_thrust_commands, quad_params,
                                                  rotor_layout, rotorpy_state, state_from_rotorpy)
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file, shipped_vehicles
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file, shipped_vehicles
 
 needs_rotorpy = pytest.mark.skipif(importlib.util.find_spec('rotorpy') is None, reason='RotorPy is not installed '
                                    '(pip install rotorpy==3.0.0, in requirements-test.txt)')

@@ -428,7 +428,7 @@ def test_the_measurement_stage_is_off_for_every_kind_without_its_gains_and_refus
 def test_a_campaign_spec_switches_the_measurement_stage_of_every_controller():
     from flight_stack.campaign.batch import CampaignSetup
     from flight_stack.campaign.spec import parse_spec
-    from quad_msgs_bridge.vehicle_params import ParameterError
+    from quad_msgs_bridge.validation import ParameterError
     base = {'scenario': 'hover', 'controllers': ['pid', 'nnit2fsmc'], 'flights': 1}
     on = CampaignSetup.of(parse_spec(base)).gains['common']
     off = CampaignSetup.of(parse_spec({**base, 'measurement_filters': False})).gains['common']

@@ -16,7 +16,7 @@ from flight_stack.campaign.spec import parse_spec
 from nnit2fsmc_controller.factory import (DEFAULT_CONTROLLER_FILE, PAPER_FAITHFUL, flatten_gains, gain_names,
                                           load_gains, locate_gains, shipped_gains, unflatten_gains)
 from nnit2fsmc_controller.search_spaces import SEARCH_SPACES, search_space, values_in, with_values
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from flight_stack.studies import heldout, paper_tables, scoreboard
 

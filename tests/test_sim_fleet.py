@@ -6,7 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from quad_msgs_bridge.contract import vehicle_namespaces
 from quad_sim.fleet import Fleet, LockstepAnswers, split_initial_states
 from quad_sim.model import QuadrotorModel

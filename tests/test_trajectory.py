@@ -7,7 +7,7 @@ import pytest
 from nnit2fsmc_controller.trajectory import SCENARIOS, Helix, Hover, Steps, Waypoints, make_scenario
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.reference import ReferenceSample
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 
 def derivative_check(trajectory, t, h=1e-5):

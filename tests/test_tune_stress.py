@@ -24,7 +24,8 @@ from flight_stack.campaign.stress import (KINDS, BreakingPoint, StressSetup, Tal
 from flight_stack.campaign.tune import TuneSetup, objective, tune
 from nnit2fsmc_controller.factory import build_controller, load_gains
 from nnit2fsmc_controller.search_spaces import SEARCH_SPACES, search_space, values_in, with_values
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 DOCUMENT = {'scenario': 'paper', 'duration': 2.0, 'settle_time': 1.2, 'controllers': ['pid'], 'flights': 3,
             'seed': 0, 'control_rate_hz': 250, 'physics_rate_hz': 500,

@@ -9,7 +9,8 @@ import nnit2fsmc_controller
 from nnit2fsmc_controller.factory import CONTROLLERS, build_controller, build_measurement_stage, load_gains
 from nnit2fsmc_controller.tuning import has_state, retune, retune_measurement
 from quad_msgs_bridge.reference import ReferenceSample
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 PARAMS, _ = load_vehicle_file()
 REFERENCE = ReferenceSample((1.0, 0.0, 1.0), (0.0, 0.5, 0.1), (-0.25, 0.0, 0.0), 0.3, 0.5, 0.0)

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 import yaml
 
-from quad_msgs_bridge.vehicle_params import (DEFAULT_VEHICLE_FILE, Disturbance, Disturbances, ParameterError,
-                                             VehicleParams, check_number, load_vehicle_file)
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import (DEFAULT_VEHICLE_FILE, Disturbance, Disturbances, VehicleParams,
+                                             load_vehicle_file)
 
 
 def default_document() -> dict:

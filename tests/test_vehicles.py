@@ -12,8 +12,9 @@ from flight_stack.api import CONTROLLERS, fly, load_vehicle, read_flight
 from quad_msgs_bridge.conversions import rosbags_kit, rotor_forces_msg
 from quad_msgs_bridge.mixer import forces_from_controls
 from quad_msgs_bridge.urdf import rotor_transforms_msg, vehicle_urdf
-from quad_msgs_bridge.vehicle_params import (ParameterError, VehicleParams, load_vehicle_file, locate_vehicle,
-                                             shipped_vehicles, vehicle_name)
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import (VehicleParams, load_vehicle_file, locate_vehicle, shipped_vehicles,
+                                             vehicle_name)
 from quad_sim.model import QuadrotorModel
 from ros_support import requires_ros
 

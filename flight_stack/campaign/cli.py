@@ -8,7 +8,7 @@ from pathlib import Path
 from .runner import MAX_BATCH_SIZE
 
 from quad_msgs_bridge.output_path import output_path
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 from quad_sim.plants import PLANTS
 
 DESCRIPTION = """Fly a robustness campaign: every controller of the spec flies the same perturbed flights

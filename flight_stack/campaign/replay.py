@@ -15,7 +15,7 @@ from quad_msgs_bridge.bag.flight_bag import FlightBag, disturbances_label
 from quad_msgs_bridge.contract import GROUND_TRUTH, RECORDED_TOPICS
 from quad_msgs_bridge.review.command import review_flights
 from quad_msgs_bridge.review.flight_from_bag import BagFlight
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from ..embedded import fly_embedded
 from ..summary import build_summary, write_summary

@@ -33,7 +33,7 @@ import yaml
 
 from nnit2fsmc_controller.factory import gains_flown_by
 from nnit2fsmc_controller.registry import controller_kind
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from ..interrupts import stop_signals
 from ..locking import FileLock

@@ -11,19 +11,13 @@ and every controller of a campaign flies the same vehicles in the same air.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 from typing import Sequence
 
-import numpy as np
-
 from quad_msgs_bridge.vehicle_params import VehicleParams
-from quad_sim.perturbations.actuation import MotorLag, TransportDelay
-from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
 from quad_sim.perturbations.streams import flight_stream
-from quad_sim.perturbations.wind import Wind
+from quad_sim.world import Perturbations, build_perturbations as world_perturbations, wind_direction
 
-from ..embedded import Perturbations
 from .spec import CampaignSpec
 
 TRANSLATIONAL_DRAG = ('Kfx', 'Kfy', 'Kfz', 'Kfphi', 'Kftheta', 'Kfpsi')
@@ -37,8 +31,6 @@ SAMPLED_COLUMNS = ('mass_kg', 'Ix_kgm2', 'Iy_kgm2', 'Iz_kgm2', *TRANSLATIONAL_DR
                    *(f'{name}{i}{unit}' for i in range(1, 5)
                      for name, unit in (('Kp', '_Nss'), ('Kd', '_Nmss'), ('efficiency_loss', ''))),
                    'cog_x_m', 'cog_y_m', 'wind_direction_rad')
-NOISE_FIELDS = {'position_m': 'position', 'velocity_mps': 'velocity', 'attitude_rad': 'attitude',
-                'body_rate_radps': 'body_rate'}
 
 
 @dataclass(frozen=True)
@@ -88,9 +80,7 @@ def sample_conditions(spec: CampaignSpec, nominal: VehicleParams, flight: int) -
         rotor_drag_factors=tuple(relative('drag_coefficient', i) for i in range(4)),
         cog_offset=(absolute('cog_offset_m', 0), absolute('cog_offset_m', 1), 0.0),
         rotor_efficiency_loss=tuple(losses))
-    direction = (math.radians(spec.wind_direction_deg) if spec.wind_direction_deg is not None
-                 else float(flight_stream(spec.seed, flight, 'wind').uniform(0.0, 2.0 * math.pi)))
-    return FlightConditions(flight, vehicle, direction)
+    return FlightConditions(flight, vehicle, wind_direction(spec.world, spec.seed, flight))
 
 
 def loss_draw(spec: CampaignSpec, key: str, draws: dict, index: int) -> float:
@@ -103,32 +93,10 @@ def loss_draw(spec: CampaignSpec, key: str, draws: dict, index: int) -> float:
     return loss.scale * draws[key][index] if loss.kind == 'uniform' else abs(loss.value(draws[key][index]))
 
 
-def _noise_levels(spec: CampaignSpec, attribute: str) -> SensorErrors:
-    return SensorErrors(**{field: getattr(spec.sensor_noise[key], attribute)
-                           for key, field in NOISE_FIELDS.items() if key in spec.sensor_noise})
-
-
 def build_perturbations(spec: CampaignSpec, conditions: Sequence[FlightConditions], control_dt: float,
                         physics_dt: float, batch: bool) -> Perturbations:
-    """The perturbation objects that fly ``conditions``: of one vehicle (``batch`` false, one
-    condition) or of a batch (arrays, one element and one random stream per flight, in order)."""
-    def rngs(purpose: str):
-        chosen = [flight_stream(spec.seed, c.flight, purpose) for c in conditions]
-        return chosen if batch else chosen[0]
-
-    vehicle = VehicleParams.stack([c.vehicle for c in conditions]) if batch else conditions[0].vehicle
-    direction = np.array([c.wind_direction for c in conditions]) if batch else conditions[0].wind_direction
-    mean_speed = np.full(len(conditions), spec.wind_mean_speed_mps) if batch else spec.wind_mean_speed_mps
-    noise = None
-    if spec.sensor_noise:
-        noise = SensorNoise(_noise_levels(spec, 'std'), _noise_levels(spec, 'bias_std'),
-                            rngs('sensor_noise'), rngs('sensor_bias'))
-    wind = None
-    if spec.has_wind:
-        wind = Wind(physics_dt, mean_speed, direction, spec.turbulence,
-                    rngs('turbulence') if spec.turbulence != 'none' else None)
-    return Perturbations(
-        true_vehicle=vehicle, sensor_noise=noise,
-        delay=TransportDelay.from_seconds(spec.delay_s, control_dt) if spec.delay_s > 0.0 else None,
-        motor_lag=MotorLag(spec.motor_time_constant_s, physics_dt) if spec.motor_time_constant_s > 0.0 else None,
-        wind=wind)
+    """The perturbation objects that fly ``conditions`` in the spec's world (:func:`quad_sim.world.build_perturbations`):
+    of one vehicle (``batch`` false, one condition) or of a batch (arrays, one element and one random stream per
+    flight, in order)."""
+    return world_perturbations(spec.world, spec.seed, [c.flight for c in conditions], [c.vehicle for c in conditions],
+                               [c.wind_direction for c in conditions], control_dt, physics_dt, batch)

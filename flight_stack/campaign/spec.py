@@ -57,7 +57,8 @@ from nnit2fsmc_controller.factory import CONTROLLERS
 from nnit2fsmc_controller.registry import check_controller
 from quad_sim.plants import DEFAULT_PLANT, check_plant
 from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_msgs_bridge.validation import ParameterError, check_keys, check_number
+from quad_sim.world import NoiseLevel, World, parse_world
 
 #: spec key -> what it perturbs (documentation of the vehicle section)
 VEHICLE_KEYS = {
@@ -77,8 +78,6 @@ LOSS_KEYS = ('rotor_efficiency_loss', 'one_rotor_efficiency_loss')
 DISTRIBUTIONS = ('uniform', 'normal', 'fixed')
 #: the YAML key of each distribution's scale
 SCALE_KEYS = {'uniform': 'half_width', 'normal': 'std', 'fixed': 'value'}
-TURBULENCE = ('none', 'light', 'moderate', 'severe')
-NOISE_KEYS = ('position_m', 'velocity_mps', 'attitude_rad', 'body_rate_radps')
 _STANDARD_NORMAL = NormalDist()
 TOP_KEYS = ('scenario', 'duration', 'settle_time', 'controllers', 'flights', 'seed', 'max_error_m',
             'disturbances', 'vehicle', 'wind', 'sensor_noise', 'delay_s', 'motor_time_constant_s',
@@ -113,14 +112,6 @@ class Distribution:
 
 
 @dataclass(frozen=True)
-class NoiseLevel:
-    """White-noise standard deviation and per-flight bias standard deviation of one odometry part."""
-
-    std: float = 0.0
-    bias_std: float = 0.0
-
-
-@dataclass(frozen=True)
 class CampaignSpec:
     """A validated ``SPEC.yaml`` (see the module docstring); SI units throughout."""
 
@@ -146,8 +137,14 @@ class CampaignSpec:
     source: str = ''                     #: the YAML text it was read from (kept with the results)
 
     @property
+    def world(self) -> World:
+        """The air, sensors and actuators every flight of the campaign flies in (quad_sim.world)."""
+        return World(self.wind_mean_speed_mps, self.wind_direction_deg, self.turbulence, self.sensor_noise,
+                     self.delay_s, self.motor_time_constant_s)
+
+    @property
     def has_wind(self) -> bool:
-        return self.wind_mean_speed_mps > 0.0 or self.turbulence != 'none'
+        return self.world.has_wind
 
     def overridden(self, *, flights: int | None = None, seed: int | None = None,
                    duration: float | None = None, controllers: list[str] | None = None,
@@ -179,14 +176,8 @@ class CampaignSpec:
         if self.vehicle:
             document['vehicle'] = {key: {'dist': d.kind, SCALE_KEYS[d.kind]: d.scale}
                                    for key, d in self.vehicle.items()}
-        if self.has_wind:
-            document['wind'] = {'mean_speed_mps': self.wind_mean_speed_mps, 'turbulence': self.turbulence}
-            if self.wind_direction_deg is not None:
-                document['wind']['direction_deg'] = self.wind_direction_deg
-        if self.sensor_noise:
-            document['sensor_noise'] = {key: {'std': n.std, 'bias_std': n.bias_std}
-                                        for key, n in self.sensor_noise.items()}
-        for key in ('delay_s', 'motor_time_constant_s', 'control_rate_hz', 'physics_rate_hz'):
+        document.update(self.world.to_mapping())
+        for key in ('control_rate_hz', 'physics_rate_hz'):
             if getattr(self, key):
                 document[key] = getattr(self, key)
         if self.plant != DEFAULT_PLANT:
@@ -219,23 +210,13 @@ def _controllers(value, key: str) -> tuple[str, ...]:
     return tuple(value)
 
 
-def _mapping(value, key: str, allowed) -> Mapping:
-    """``value`` checked to be a mapping of known keys; ``key`` is its place in the spec ('' at the top)."""
-    if not isinstance(value, Mapping):
-        raise ParameterError(f'{key or "spec"}: expected a mapping, got {value!r}')
-    for name in value:
-        if name not in allowed:
-            raise ParameterError(f'{key + "." if key else ""}{name}: unknown key (valid keys: {", ".join(allowed)})')
-    return value
-
-
 def _distribution(value, key: str, relative: bool) -> Distribution:
     if isinstance(value, Mapping):
         kind = value.get('dist', 'uniform')
         if kind not in DISTRIBUTIONS:
             raise ParameterError(f'{key}.dist: {kind!r} is not one of {", ".join(DISTRIBUTIONS)}')
         scale_key = SCALE_KEYS[kind]
-        _mapping(value, key, ('dist', scale_key))
+        check_keys(value, key, ('dist', scale_key))
         if scale_key not in value:
             raise ParameterError(f'{key}.{scale_key}: missing')
         if kind == 'fixed':
@@ -249,14 +230,6 @@ def _distribution(value, key: str, relative: bool) -> Distribution:
         raise ParameterError(f'{key}: draws of up to +-{distribution.bound:g} (relative) could make the '
                              'parameter zero or negative; keep the half width (or 3 std) below 1')
     return distribution
-
-
-def _noise(value, key: str) -> NoiseLevel:
-    if isinstance(value, Mapping):
-        _mapping(value, key, ('std', 'bias_std'))
-        return NoiseLevel(check_number(f'{key}.std', value.get('std', 0.0), 0.0),
-                          check_number(f'{key}.bias_std', value.get('bias_std', 0.0), 0.0))
-    return NoiseLevel(check_number(key, value, 0.0))
 
 
 def _check_representable(spec: CampaignSpec) -> None:
@@ -275,7 +248,7 @@ def _check_settling(spec: CampaignSpec, key: str) -> None:
 
 def parse_spec(document: Any, source: str = '') -> CampaignSpec:
     """Validate a spec mapping (see the module docstring); ParameterError names the offending key."""
-    top = _mapping(document if document is not None else {}, '', TOP_KEYS)
+    top = check_keys(document if document is not None else {}, '', TOP_KEYS)
     for required in ('scenario', 'controllers', 'flights'):
         if required not in top:
             raise ParameterError(f'{required}: missing (required keys: scenario, controllers, flights)')
@@ -284,16 +257,11 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
         raise ParameterError(f'scenario: {scenario!r} is not one of {", ".join(SCENARIOS)}')
     duration = top.get('duration')
     trajectory = make_scenario(scenario, duration)
-    vehicle = _mapping(top.get('vehicle', {}), 'vehicle', tuple(VEHICLE_KEYS))
-    wind = _mapping(top.get('wind', {}), 'wind', ('mean_speed_mps', 'turbulence', 'direction_deg'))
-    turbulence = wind.get('turbulence', 'none')
-    if turbulence not in TURBULENCE:
-        raise ParameterError(f'wind.turbulence: {turbulence!r} is not one of {", ".join(TURBULENCE)}')
-    noise = _mapping(top.get('sensor_noise', {}), 'sensor_noise', NOISE_KEYS)
+    vehicle = check_keys(top.get('vehicle', {}), 'vehicle', tuple(VEHICLE_KEYS))
+    world = parse_world(top)
     disturbances = top.get('disturbances')
     if disturbances is not None and not isinstance(disturbances, bool):
         raise ParameterError(f'disturbances: expected true or false, got {disturbances!r}')
-    direction = wind.get('direction_deg')
     measurement_filters = top.get('measurement_filters', True)
     if not isinstance(measurement_filters, bool):
         raise ParameterError(f'measurement_filters: expected true or false, got {measurement_filters!r}')
@@ -308,12 +276,9 @@ def parse_spec(document: Any, source: str = '') -> CampaignSpec:
         disturbances=disturbances,
         vehicle={key: _distribution(value, f'vehicle.{key}', relative=key not in ABSOLUTE_VEHICLE_KEYS)
                  for key, value in vehicle.items()},
-        wind_mean_speed_mps=check_number('wind.mean_speed_mps', wind.get('mean_speed_mps', 0.0), 0.0),
-        wind_direction_deg=None if direction is None else check_number('wind.direction_deg', direction),
-        turbulence=turbulence,
-        sensor_noise={key: _noise(value, f'sensor_noise.{key}') for key, value in noise.items()},
-        delay_s=check_number('delay_s', top.get('delay_s', 0.0), 0.0, 1.0),
-        motor_time_constant_s=check_number('motor_time_constant_s', top.get('motor_time_constant_s', 0.0), 0.0, 1.0),
+        wind_mean_speed_mps=world.wind_mean_speed_mps, wind_direction_deg=world.wind_direction_deg,
+        turbulence=world.turbulence, sensor_noise=world.sensor_noise, delay_s=world.delay_s,
+        motor_time_constant_s=world.motor_time_constant_s,
         control_rate_hz=(None if 'control_rate_hz' not in top
                          else check_number('control_rate_hz', top['control_rate_hz'], 0.0, 1e5, low_inclusive=False)),
         physics_rate_hz=(None if 'physics_rate_hz' not in top

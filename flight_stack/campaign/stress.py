@@ -35,7 +35,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 
 from .batch import CampaignSetup
 from .results import FLIGHTS_FILE, read_flights, wilson_interval

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 TUNE_DESCRIPTION = """Tune one controller kind on campaigns with Optuna (docs/TUNING.md): N trials, each the kind's
 gains flown on M flights of every tuning seed (the campaign runner: local workers or a Dask cluster).

@@ -31,7 +31,7 @@ import yaml
 
 from nnit2fsmc_controller.factory import load_gains
 from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from ..locking import FileLock
 from .batch import CampaignSetup

@@ -8,7 +8,7 @@ import pkgutil
 import sys
 from pathlib import Path
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 #: the modules of flight_stack/studies/ that are not studies
 HELPERS = ('cli', 'common')

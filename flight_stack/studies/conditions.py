@@ -27,7 +27,8 @@ import dataclasses
 
 from flight_stack.api import fly
 from nnit2fsmc_controller.factory import CONTROLLERS
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 from . import margins, paper_tables
 from .common import add_out, names, run_all, study_name, write_table

@@ -62,7 +62,8 @@ from flight_stack.embedded import Perturbations, fly_embedded
 from nnit2fsmc_controller import factory
 from nnit2fsmc_controller import trajectory as trajectories
 from quad_msgs_bridge.review.metrics import default_settle_time, flight_metrics, has_fuzzy_term
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 from quad_sim.perturbations.actuation import MotorLag, TransportDelay
 from quad_sim.perturbations.sensor_noise import SensorErrors, SensorNoise
 from quad_sim.perturbations.streams import flight_streams

@@ -51,7 +51,7 @@ from flight_stack.campaign.spec import load_spec
 from flight_stack.campaign.stress import BREAKING_POINTS_FILE, KINDS as DISTURBANCES
 from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE, flatten_gains, load_gains, locate_gains
 from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from . import heldout, margins, paper_tables
 from .common import add_out, names, progress, run_all, study_name

@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.numeric import namespace_for
-from quad_msgs_bridge.vehicle_params import check_number
+from quad_msgs_bridge.validation import check_number
 
 from .it2_fuzzy import IT2FuzzyCorrector, corrective_term, input_scale_of
 from .kernel_state import BOOL, OPTIONAL, Slot

@@ -42,7 +42,8 @@ import numpy as np
 
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.reference import ReferenceSample
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import VehicleParams
 
 from .axis_laws import AxisOutput
 from .controller import AXES, ControlOutput, check_inputs

@@ -63,7 +63,8 @@ from quad_msgs_bridge.numeric import BATCH, namespace_for, select
 from quad_msgs_bridge.reference import REFERENCE_UNITS, ReferenceSample
 from quad_msgs_bridge.state import STATE_LAYOUT, STATE_NAMES
 from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, clip_allocation, controls_from_forces, priority_allocation
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import VehicleParams
 
 from .axis_laws import AxisOutput, law_step, set_law_learning
 from .kernel_state import OPTIONAL, Slot

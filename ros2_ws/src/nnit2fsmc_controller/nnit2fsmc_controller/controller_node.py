@@ -38,7 +38,8 @@ from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.ros_helpers import declare, publication_log, publisher, run_node, subscription
 from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.timebase import nanoseconds, seconds, stamp_fields
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 from .factory import (CONTROLLERS, build_controller, build_measurement_stage, compile_kernels, flatten_gains,
                       gain_choices, gain_description, load_gains, unflatten_gains)

@@ -30,7 +30,7 @@ from numba import njit
 
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.numeric import namespace_for
-from quad_msgs_bridge.vehicle_params import check_number
+from quad_msgs_bridge.validation import check_number
 
 #: (filtered component, its rate) in the controller's 12-state x y z vx vy vz phi theta psi dphi dtheta dpsi
 PAIRS = ((0, 3), (1, 4), (2, 5), (6, 9), (7, 10), (8, 11))

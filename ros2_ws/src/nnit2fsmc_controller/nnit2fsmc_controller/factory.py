@@ -14,7 +14,8 @@ from quad_msgs_bridge.frames import quaternion_from_euler
 from quad_msgs_bridge.mixer import ALLOCATIONS
 from quad_msgs_bridge.reference import SetpointPath, hold
 from quad_msgs_bridge.state import odometry_from_state, state_from_odometry
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import VehicleParams
 from quad_msgs_bridge.yaml_files import load_yaml
 
 

@@ -36,7 +36,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams
 
 #: the exponent of the control scale 1 / b each unit takes (module docstring)
 UNITS = {'none': 0, 'control': 1, 'control^-2': -2}

@@ -73,7 +73,7 @@ from numba import njit
 
 from quad_msgs_bridge.frames import body_rates_from_euler_rates, rotation_from_euler
 from quad_msgs_bridge.numeric import namespace_for
-from quad_msgs_bridge.vehicle_params import check_number
+from quad_msgs_bridge.validation import check_number
 
 from .controller import flat_attitude_of
 from .l1_adaptive import memory_slots, per_vehicle_rows

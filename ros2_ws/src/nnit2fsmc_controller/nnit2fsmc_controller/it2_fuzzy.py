@@ -34,7 +34,7 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.numeric import is_batch
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 
 LABELS = ('NB', 'NM', 'ZE', 'PM', 'PB')
 CENTRES = (-1.0, -0.5, 0.0, 0.5, 1.0)

@@ -58,7 +58,7 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.frames import body_rates_from_euler_rates
-from quad_msgs_bridge.vehicle_params import check_number
+from quad_msgs_bridge.validation import check_number
 
 from .se3 import SE3Controller
 

@@ -58,7 +58,7 @@ import numpy as np
 from numba import njit
 
 import quad_msgs_bridge.kernel_cache  # noqa: F401  (the cache stamps of the kernels below)
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 
 from .kernel_state import TUPLE, Slot
 

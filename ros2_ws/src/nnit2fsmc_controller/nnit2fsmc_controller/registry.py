@@ -22,7 +22,8 @@ from dataclasses import dataclass
 from importlib import metadata
 from typing import Any, Callable, Mapping
 
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams
 
 from .contract import ContractController, Gain, flat_schema
 from .search_spaces import Dimension

@@ -52,7 +52,8 @@ from quad_msgs_bridge.frames import body_rates_from_euler_rates, rotation_from_e
 from quad_msgs_bridge.mixer import allocate, controls_from_forces
 from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.reference import ReferenceSample
-from quad_msgs_bridge.vehicle_params import VehicleParams, check_number
+from quad_msgs_bridge.validation import check_number
+from quad_msgs_bridge.vehicle_params import VehicleParams
 
 from .axis_laws import AxisOutput
 from .controller import AXES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_inputs, finite_output

@@ -17,7 +17,7 @@ import copy
 from dataclasses import dataclass
 from typing import Any, Mapping
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 
 @dataclass(frozen=True)

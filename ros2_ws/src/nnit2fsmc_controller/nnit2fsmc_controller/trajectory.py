@@ -10,7 +10,7 @@ import math
 from dataclasses import dataclass
 
 from quad_msgs_bridge.reference import ReferenceSample, hold
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 
 Vec3 = tuple[float, float, float]
 

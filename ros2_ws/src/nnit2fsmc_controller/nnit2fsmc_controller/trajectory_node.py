@@ -15,7 +15,7 @@ from quad_msgs_bridge.conversions import MessageKit, path_msg, rosbags_kit, setp
 from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.ros_helpers import declare, publication_log, publisher, run_node
 from quad_msgs_bridge.timebase import seconds
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from .trajectory import SCENARIOS, make_scenario
 

@@ -12,7 +12,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from .controller import CascadedController
 from .estimation import MeasurementStage

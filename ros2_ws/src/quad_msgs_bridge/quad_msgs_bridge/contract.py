@@ -17,7 +17,7 @@ import re
 from dataclasses import dataclass
 from typing import Sequence
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 ODOM_FRAME = 'odom'           #: world frame, ENU (REP 103/105), shared by every vehicle
 BASE_FRAME = 'base_link'      #: body frame, FLU; a vehicle's is prefixed with its namespace: base_frame()

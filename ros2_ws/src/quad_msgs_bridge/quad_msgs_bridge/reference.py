@@ -17,7 +17,7 @@ import numpy as np
 from numba import njit
 
 from quad_msgs_bridge.frames import wrap_angle
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 
 Vec3 = tuple[float, float, float]
 

@@ -37,7 +37,8 @@ import numpy as np
 from quad_msgs_bridge.frames import (_body_rates, _euler, _euler_rates, _quaternion, check_orientation, check_pitch,
                                      kernel_numbers)
 from quad_msgs_bridge.state import STATE_SIZE
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams
 
 #: RotorPy's aerodynamic coefficients of its packaged "hummingbird" vehicle (rotorpy 3.0.0,
 #: ``rotorpy/vehicles/hummingbird_params.py``: an AscTec Hummingbird, 0.5 kg), from which

@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Sequence
 
 from quad_msgs_bridge.state import STATE_SIZE, OdometrySample
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 from .model import QuadrotorModel
 from .simulator import Simulator

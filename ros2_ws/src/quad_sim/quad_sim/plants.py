@@ -3,7 +3,8 @@
 ``with_vehicle(params)``, so :class:`~quad_sim.simulator.Simulator` and everything above it are the same."""
 from __future__ import annotations
 
-from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 from .model import QuadrotorModel
 

@@ -32,7 +32,8 @@ from quad_msgs_bridge import px4
 from quad_msgs_bridge.contract import CLOCK, ODOM, ODOM_FRAME, ROTOR_FORCES, base_frame
 from quad_msgs_bridge.conversions import MessageKit, odometry_msg, rotor_forces_from_msg, time_msg
 from quad_msgs_bridge.ros_helpers import declare, publisher, run_node, subscription
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 from .px4_offboard import CONTROL_LEVELS, OffboardConfig, OffboardCore, Phase, Px4Status
 

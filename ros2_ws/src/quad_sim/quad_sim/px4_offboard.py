@@ -56,7 +56,8 @@ from typing import NamedTuple, Sequence
 from quad_msgs_bridge import px4
 from quad_msgs_bridge.mixer import controls_from_forces
 from quad_msgs_bridge.state import OdometrySample, odometry_from_state
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import VehicleParams
 
 CONTROL_LEVELS = ('direct_actuator', 'thrust_and_torque')
 

@@ -24,7 +24,8 @@ from quad_msgs_bridge.rotorpy_conversion import (ROTORPY_MOTOR_TIME_CONSTANT, ae
                                                  motor_thrust_commands, quad_params, rotor_speeds_of,
                                                  rotor_thrust_scales, rotorpy_state, state_from_rotorpy)
 from quad_msgs_bridge.state import STATE_SIZE
-from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 from .rotorpy_plant import ROTORPY_VERSION, batch_vehicles, disturbance_wrench, put_on_ground
 

@@ -29,7 +29,8 @@ from quad_msgs_bridge.rotorpy_conversion import (ROTORPY_MOTOR_TIME_CONSTANT, ae
                                                  quad_params, rotor_speeds_of, rotor_thrust_scales, rotorpy_state,
                                                  state_from_rotorpy)
 from quad_msgs_bridge.state import STATE_SIZE
-from quad_msgs_bridge.vehicle_params import Disturbances, ParameterError, VehicleParams, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams
 
 ROTORPY_VERSION = '3.0.0'   #: the pinned RotorPy (requirements-test.txt)
 

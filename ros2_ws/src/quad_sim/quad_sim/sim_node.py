@@ -43,7 +43,8 @@ from quad_msgs_bridge.ros_helpers import (declare, publication_log, publisher, r
                                           wait_for_acknowledgements)
 from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
 from quad_msgs_bridge.urdf import description_messages
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 from .fleet import Fleet, LockstepAnswers, split_initial_states
 from .plants import DEFAULT_PLANT, PLANTS, make_plant

@@ -12,7 +12,7 @@ import numpy as np
 
 from quad_msgs_bridge.state import OdometrySample, odometry_from_state
 from quad_msgs_bridge.timebase import nanoseconds, seconds
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 
 from .model import QuadrotorModel, check_state
 from .perturbations.actuation import MotorLag

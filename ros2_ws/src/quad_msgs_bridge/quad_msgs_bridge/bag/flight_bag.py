@@ -30,7 +30,8 @@ from quad_msgs_bridge.reference import SetpointPath
 from quad_msgs_bridge.state import OdometrySample
 from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND, nanoseconds
 from quad_msgs_bridge.urdf import description_messages
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, vehicle_name
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams, vehicle_name
 
 
 def select_topics(names: Sequence[str] | None) -> tuple[TopicSpec, ...]:

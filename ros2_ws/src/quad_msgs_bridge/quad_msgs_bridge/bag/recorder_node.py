@@ -57,7 +57,8 @@ from quad_msgs_bridge.bag.flight_bag import ros_flight_custom_data
 from quad_msgs_bridge.ros_helpers import declare, init_ros, qos_profile
 from quad_msgs_bridge.runtime import freeze_long_lived_objects
 from quad_msgs_bridge.timebase import NANOSECONDS_PER_SECOND
-from quad_msgs_bridge.vehicle_params import ParameterError, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 RECORD_DEPTH = 10000     #: reader history per topic: rounds ROUND_PERIOD apart never let it overflow
 ROUND_PERIOD = 0.01      #: [s, wall] the recorder takes what waits this often

@@ -38,7 +38,8 @@ from quad_msgs_bridge.review.metrics import FlightRecord, default_settle_time, f
 from quad_msgs_bridge.review.summary import bag_summary
 from quad_msgs_bridge.review.verdict import ending
 from quad_msgs_bridge.state import state_from_odometry, states_from_odometry_rows
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, load_vehicle_file
+from quad_msgs_bridge.validation import ParameterError
+from quad_msgs_bridge.vehicle_params import VehicleParams, load_vehicle_file
 
 #: FlightLog rows that no flight reaches: every control step kept
 EVERY_STEP = 1 << 62

@@ -11,7 +11,7 @@ from collections import deque
 from typing import Sequence
 
 from quad_msgs_bridge.numeric import namespace_for
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number, check_values
+from quad_msgs_bridge.validation import ParameterError, check_number, check_values
 
 #: |delay / control step - k| above which a delay is not a whole number k of control steps.
 WHOLE_STEPS_TOLERANCE = 1e-6

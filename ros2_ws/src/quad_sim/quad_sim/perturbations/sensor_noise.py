@@ -30,7 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 
 from quad_msgs_bridge.frames import body_rates_from_euler_rates, euler_rates_from_body_rates
-from quad_msgs_bridge.vehicle_params import check_values
+from quad_msgs_bridge.validation import check_values
 
 from .streams import StandardNormals, check_batch, check_rng
 

@@ -17,7 +17,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from quad_msgs_bridge.vehicle_params import ParameterError
+from quad_msgs_bridge.validation import ParameterError
 
 #: Rows (steps) drawn per refill. 128 steps x 12 values x 8 bytes = 12 kB per vehicle: a batch of
 #: 10,000 vehicles holds 123 MB for the widest consumer (twice that while refilling); the B Python

@@ -12,7 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Sequence
 
-from quad_msgs_bridge.vehicle_params import ParameterError, VehicleParams, check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
+from quad_msgs_bridge.vehicle_params import VehicleParams
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,7 @@ import math
 from typing import NamedTuple
 
 from quad_msgs_bridge.numeric import namespace_for
-from quad_msgs_bridge.vehicle_params import ParameterError, check_number, check_values
+from quad_msgs_bridge.validation import ParameterError, check_number, check_values
 
 from .streams import StandardNormals, check_batch, check_rng
 
