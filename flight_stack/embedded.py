@@ -130,6 +130,19 @@ def physics_substeps(control_dt: float, physics_rate: float) -> int:
     return substeps
 
 
+def say_compiling(progress: bool) -> None:
+    """With ``progress``, say on stderr that the kernels compile before the first control step (numba: about 20 s
+    on an idle core the first time, a minute on a loaded one; loaded from its cache after)."""
+    if progress:
+        print('  compiling the kernels (numba; cached after the first run)', file=sys.stderr, flush=True)
+
+
+def say_ready(progress: bool, started: float) -> None:
+    """With ``progress``, say how long the first control step took since ``started`` [s, perf_counter]."""
+    if progress:
+        print(f'  kernels ready in {time.perf_counter() - started:.1f} s; flying', file=sys.stderr, flush=True)
+
+
 def through_odometry(t: float, state: list):
     """The state as the controller reads it from an odometry message of it, and that message's content."""
     odometry = odometry_from_state(t, state)
@@ -178,14 +191,13 @@ def fly_embedded(controller_kind: str, trajectory, params: VehicleParams, distur
     freeze_long_lived_objects()
     started = time.perf_counter()
     slopes = controller.surface_slopes()   # the gains do not change during an embedded flight
-    if progress:
-        print('  compiling the kernels (numba; cached after the first run)', file=sys.stderr, flush=True)
+    say_compiling(progress)
     for k in range(steps):
         if stop is not None and stop():
             raise KeyboardInterrupt(f'stopped after {k} control steps')
         done = loop.step()
-        if progress and k == 0:
-            print(f'  kernels ready in {time.perf_counter() - started:.1f} s; flying', file=sys.stderr, flush=True)
+        if k == 0:
+            say_ready(progress, started)
         out, reference, truth = done.output, done.reference, done.truth
         surfaces, equivalent, corrective = [list(field) for field in zip(*out.axes.values())][1:]   # per subsystem
         truth_odometry = None if perturbations.sensor_noise is None else odometry_from_state(done.time, truth)
@@ -266,12 +278,15 @@ def fly_fleet(controller_kind: str, trajectories: Sequence, params: VehicleParam
     report_every = max(1, steps // 10)
     freeze_long_lived_objects()
     started = time.perf_counter()
+    say_compiling(progress)
     with np.errstate(all='ignore'):          # a failing vehicle may overflow before it is frozen
         for k in range(steps):
             if stop is not None and stop():
                 raise KeyboardInterrupt(f'stopped after {k} control steps')
             flying = loop.flying.copy()
             done = loop.step()
+            if k == 0:
+                say_ready(progress, started)
             out, reference = done.output, done.reference
             axes = list(out.axes.values())
             odometries = [_vehicle(done.observation, v) for v in range(count)]

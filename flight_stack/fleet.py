@@ -8,8 +8,6 @@ apart along y, ``uav1`` on the scenario itself, each starting at rest under its 
 """
 from __future__ import annotations
 
-import sys
-import time
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -82,25 +80,3 @@ def format_fleet_summary(fleet: dict) -> str:
                      + f'  {"OK" if summary["flight_ok"] else "FAILED"}')
     lines.append('  result: ' + ('OK' if fleet['flight_ok'] else 'FAILED: ' + '; '.join(fleet['failures'])))
     return '\n'.join(lines)
-
-
-
-class CompileNotice:
-    """Says on stderr, as a single embedded flight does, that the kernels compile before a fleet's first control
-    step (numba: about 20 s on an idle core the first time, a minute on a loaded one; loaded from its cache
-    after), then how long that took. Give it as ``stop`` to :func:`flight_stack.embedded.fly_fleet`, which calls
-    it before every control step: it never stops the flight."""
-
-    def __init__(self):
-        self.calls = 0
-        self.started = 0.0      #: [s] perf_counter() before the first step
-
-    def __call__(self) -> bool:
-        if self.calls == 0:
-            print('  compiling the kernels (numba; cached after the first run)', file=sys.stderr, flush=True)
-            self.started = time.perf_counter()
-        elif self.calls == 1:
-            print(f'  kernels ready in {time.perf_counter() - self.started:.1f} s; flying', file=sys.stderr,
-                  flush=True)
-        self.calls += 1
-        return False
