@@ -16,8 +16,8 @@ Examples:
   python3 run_stack.py --controller smc-sign --out out/sign   # same disturbances, to compare
   python3 run_stack.py --backend ros --vehicles 3        # uav1..uav3 on one sim clock, 3 m apart along y
 
-Subcommands (each has its own --help): campaign, tune, stress, and the bag tools review, recover, export,
-rosbag2-qos (below).
+Subcommands (each has its own --help): campaign, tune, stress, study (the studies behind the docs' tables),
+list (what can be named), and the bag tools review, recover, export, rosbag2-qos (below).
   python3 run_stack.py campaign SPEC.yaml --out DIR      # a robustness campaign (docs/CAMPAIGNS.md);
                                                          #   the shipped specs: run_stack.py campaign --list
   python3 run_stack.py tune SPEC.yaml --controller pid --trials 40 --flights 100 --out DIR   # docs/TUNING.md
