@@ -47,6 +47,9 @@ CAMPAIGN_SPEC = 'mild-every-perturbation'
 CAMPAIGN = dict(flights=6, duration=3.0, controllers=['nnit2fsmc', 'pid', 'indi'], workers=1)
 #: a flights.csv column whose name contains one of these depends on wall time (batch.COLUMNS has none at 0ff291a)
 WALL_TIME_COLUMNS = ('wall', 'elapsed', 'clock', 'timestamp', 'per_s_real')
+#: columns flights.csv gained after 0ff291a (each flight's actuator, recorded since it can be drawn per flight):
+#: left out, so the flights themselves are compared
+ADDED_COLUMNS = ('motor_time_constant_s', 'delay_s')
 #: the source folders of the repository (pyproject's pytest pythonpath)
 SOURCE_DIRS = ('.', 'ros2_ws/src/quad_msgs_bridge', 'ros2_ws/src/quad_sim', 'ros2_ws/src/nnit2fsmc_controller')
 
@@ -60,9 +63,10 @@ def _digest(*arrays) -> str:
 
 
 def _csv_digest(path: Path) -> str:
-    """sha256 of flights.csv with its wall-time columns (if any) left out, rows in the file's order."""
+    """sha256 of flights.csv with its wall-time columns (if any) and ADDED_COLUMNS left out, rows in the file's order."""
     rows = list(csv.reader(io.StringIO(path.read_text())))
-    keep = [i for i, name in enumerate(rows[0]) if not any(w in name.lower() for w in WALL_TIME_COLUMNS)]
+    keep = [i for i, name in enumerate(rows[0])
+            if not any(w in name.lower() for w in WALL_TIME_COLUMNS) and name not in ADDED_COLUMNS]
     text = io.StringIO()
     csv.writer(text, lineterminator='\n').writerows([row[i] for i in keep] for row in rows)
     return hashlib.sha256(text.getvalue().encode()).hexdigest()

@@ -149,3 +149,33 @@ def test_the_packaged_specs_are_package_data():
     import tomllib
     document = tomllib.loads((ROOT / 'pyproject.toml').read_text())
     assert 'campaign/specs/*.yaml' in document['tool']['setuptools']['package-data']['flight_stack']
+
+
+def test_a_world_that_draws_its_actuator_per_flight_records_it_and_flies_it(tmp_path):
+    """motor_time_constant_s and delay_s as {low, high}: each flight draws its own from its actuator stream (the
+    delay in whole control steps, every one in the range), flights.csv records them, and flight k flies its own
+    whatever batch it is in; a range with no whole control step, or low > high, is refused by name."""
+    from flight_stack.campaign.batch import BatchJob, fly_batch
+    from quad_sim.world import Range, parse_world
+    world = parse_world({'motor_time_constant_s': {'low': 0.015, 'high': 0.045}, 'delay_s': {'low': 0.0, 'high': 0.008}})
+    assert world.motor_time_constant_s == Range(0.015, 0.045) and not world.is_nominal
+    draws = [world.actuator(5, k, 0.001) for k in range(400)]
+    lags, delays = zip(*draws)
+    assert 0.015 <= min(lags) < 0.017 and 0.043 < max(lags) <= 0.045
+    steps = sorted({round(d / 0.001) for d in delays})
+    assert steps == list(range(9)) and all(abs(d / 0.001 - round(d / 0.001)) < 1e-9 for d in delays)
+    assert draws == [world.actuator(5, k, 0.001) for k in range(400)]          # reproducible by (seed, flight)
+    with pytest.raises(ParameterError, match=r'delay_s: \[0.0001, 0.0002\] s holds no whole number of control steps'):
+        parse_world({'delay_s': {'low': 0.0001, 'high': 0.0002}}).actuator(0, 0, 0.001)
+    with pytest.raises(ParameterError, match=r'motor_time_constant_s.high: 0.01 is outside the valid range \[0.02, 1.0\]'):
+        parse_world({'motor_time_constant_s': {'low': 0.02, 'high': 0.01}})
+
+    spec = parse_spec({'scenario': 'hover', 'duration': 2.0, 'settle_time': 1.0, 'controllers': ['pid'], 'flights': 3,
+                       'seed': 5, 'motor_time_constant_s': {'low': 0.015, 'high': 0.045},
+                       'delay_s': {'low': 0.0, 'high': 0.008}})
+    together = fly_batch(BatchJob(spec, 'pid', (0, 1, 2)))
+    alone = [fly_batch(BatchJob(spec, 'pid', (k,)))[0] for k in range(3)]
+    assert repr(together) == repr(alone)                   # nan-safe: an unfailed flight's failure_time_s is nan
+    for k, row in enumerate(together):
+        assert (row['motor_time_constant_s'], row['delay_s']) == world.actuator(5, k, 0.001)
+    assert len({row['rmse_position_m'] for row in together}) == 3

@@ -14,7 +14,7 @@ def test_streams_are_the_spawned_children_of_the_flights_seed_sequence():
     for child, generator in zip(children, streams):
         reference = np.random.Generator(np.random.PCG64(child))
         assert generator.standard_normal(5).tolist() == reference.standard_normal(5).tolist()
-    assert streams._fields == ('vehicle', 'wind', 'turbulence', 'sensor_noise', 'sensor_bias')
+    assert streams._fields == ('vehicle', 'wind', 'turbulence', 'sensor_noise', 'sensor_bias', 'actuator')  # only appended
 
 
 def test_streams_are_reproducible_and_distinct():
@@ -23,7 +23,7 @@ def test_streams_are_reproducible_and_distinct():
         assert a.random(4).tolist() == b.random(4).tolist()
     draws = [g.standard_normal(20000) for g in (*flight_streams(3, 5), *flight_streams(3, 6), *flight_streams(4, 5))]
     correlation = np.corrcoef(draws)
-    # 15 streams, pairwise sample correlations of 20,000 draws: std 0.007, all below 5 sigma
+    # 18 streams, pairwise sample correlations of 20,000 draws: std 0.007, all below 5 sigma
     assert np.all(np.abs(correlation - np.eye(len(draws))) < 0.035)
 
 

@@ -26,12 +26,14 @@ from .spec import CampaignSpec
 
 BIAS_COLUMNS = tuple(f'bias_{name}' for name in ('x_m', 'y_m', 'z_m', 'vx_mps', 'vy_mps', 'vz_mps', 'phi_rad',
                                                  'theta_rad', 'psi_rad', 'p_radps', 'q_radps', 'r_radps'))
+#: each flight's actuator (quad_sim.world.World.actuator): drawn per flight, or the spec's fixed values
+ACTUATOR_COLUMNS = ('motor_time_constant_s', 'delay_s')
 #: the columns of flights.csv, in order
 COLUMNS = ('flight', 'controller', 'finished', 'failure', 'failure_time_s',
            'rmse_position_m', 'max_position_error_m', 'rmse_yaw_rad', 'chattering_force_n_per_s',
            'chattering_moment_nm_per_s',
            'chattering_U1', 'chattering_U2', 'chattering_U3', 'chattering_U4', 'saturation_fraction',
-           'control_steps', *SAMPLED_COLUMNS, *BIAS_COLUMNS)
+           'control_steps', *SAMPLED_COLUMNS, *BIAS_COLUMNS, *ACTUATOR_COLUMNS)
 
 
 @dataclass(frozen=True)
@@ -130,7 +132,8 @@ def _fly(job: BatchJob, steps: int | None) -> list[dict]:
                          'control_steps': int(_element(statistics.steps, i)),
                          'settled_steps': int(_element(statistics.settled_steps, i))},
                 failure=int(loop.failure[i]), failure_time=float(loop.failure_time[i]),
-                biases=[_element(b, i) for b in biases])
+                biases=[_element(b, i) for b in biases],
+                actuator=spec.world.actuator(spec.seed, conditions[i].flight, setup.control_dt))
             for i in range(size)]
 
 
@@ -140,12 +143,13 @@ def _element(value, index: int) -> float:
 
 
 def row(controller: str, conditions: FlightConditions, nominal: VehicleParams, outcome: dict,
-        failure: int, failure_time: float, biases) -> dict:
+        failure: int, failure_time: float, biases, actuator: tuple[float, float]) -> dict:
     """The flights.csv row of one flight: identity, outcome, metrics, every sampled value (SI units).
 
     A flight is ``finished`` when it flew its whole duration without breaking a failure rule (no
     crash, no non-finite state, position error never above max_error after settling). Its metrics
-    cover the steps it flew; they are NaN when it failed before two settled steps.
+    cover the steps it flew; they are NaN when it failed before two settled steps. ``actuator``: its motor time
+    constant and transport delay [s].
     """
     chattering = {f'U{i}': outcome[f'chattering_U{i}'] for i in range(1, 5)}
     values = {
@@ -167,4 +171,5 @@ def row(controller: str, conditions: FlightConditions, nominal: VehicleParams, o
         'control_steps': outcome['control_steps'],
         **conditions.sampled_values(nominal),
         **dict(zip(BIAS_COLUMNS, biases)),
+        **dict(zip(ACTUATOR_COLUMNS, actuator)),
     }

@@ -23,7 +23,7 @@ left out means no such perturbation; other tools write these files, so the names
     wind: {mean_speed_mps: 3.0, turbulence: moderate}   # none | light | moderate | severe
     sensor_noise: {position_m: 0.01, velocity_mps: 0.02, attitude_rad: 0.01, body_rate_radps: 0.02}
     delay_s: 0.004             # [s] transport delay, a whole number of control steps
-    motor_time_constant_s: 0.03
+    motor_time_constant_s: 0.03   # or, both: {low: 0.015, high: 0.045}, drawn per flight (quad_sim.world)
     control_rate_hz: 1000
     physics_rate_hz: 1000      # a whole multiple of control_rate_hz (default: equal to it)
     measurement_filters: true  # every controller reads through the gains file's measurement stage

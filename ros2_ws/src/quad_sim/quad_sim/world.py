@@ -47,6 +47,18 @@ class NoiseLevel:
 
 
 @dataclass(frozen=True)
+class Range:
+    """A value drawn per flight, uniformly in [low, high] (SI units)."""
+
+    low: float
+    high: float
+
+    def draw(self, u: float) -> float:
+        """The value of a standard uniform number u in [0, 1)."""
+        return self.low + u * (self.high - self.low)
+
+
+@dataclass(frozen=True)
 class World:
     """The air, sensors and actuators of a flight (SI units); the defaults are the nominal world."""
 
@@ -55,8 +67,8 @@ class World:
                                               #: None: drawn per flight
     turbulence: str = 'none'                  #: Dryden turbulence level (TURBULENCE)
     sensor_noise: Mapping[str, NoiseLevel] = field(default_factory=dict)   #: NOISE_KEYS -> level
-    delay_s: float = 0.0                      #: [s] transport delay of the rotor commands
-    motor_time_constant_s: float = 0.0        #: [s] first-order lag of every rotor's thrust
+    delay_s: float | Range = 0.0              #: [s] transport delay of the rotor commands (a Range: drawn per flight)
+    motor_time_constant_s: float | Range = 0.0   #: [s] first-order lag of every rotor's thrust (likewise)
 
     @property
     def has_wind(self) -> bool:
@@ -65,7 +77,26 @@ class World:
     @property
     def is_nominal(self) -> bool:
         """Whether nothing perturbs the air, the sensors or the actuators."""
-        return not (self.has_wind or self.sensor_noise or self.delay_s or self.motor_time_constant_s)
+        return not (self.has_wind or self.sensor_noise or _largest(self.delay_s) or _largest(self.motor_time_constant_s))
+
+    def actuator(self, seed: int, flight: int, control_dt: float) -> tuple[float, float]:
+        """Flight ``flight``'s motor time constant [s] and transport delay [s, a whole number of control steps of
+        ``control_dt`` s]: the world's, or drawn from the flight's ``actuator`` stream when a :class:`Range` (two
+        uniform numbers, lag then delay, whichever is drawn; the delay's whole steps equally likely)."""
+        u_lag, u_delay = (flight_stream(seed, flight, 'actuator').random(2).tolist()
+                          if isinstance(self.delay_s, Range) or isinstance(self.motor_time_constant_s, Range)
+                          else (0.0, 0.0))
+        lag = self.motor_time_constant_s
+        lag = lag.draw(u_lag) if isinstance(lag, Range) else lag
+        delay = self.delay_s
+        if isinstance(delay, Range):
+            fewest = math.ceil(delay.low / control_dt - 1e-6)
+            most = math.floor(delay.high / control_dt + 1e-6)
+            if most < fewest:
+                raise ParameterError(f'delay_s: [{delay.low:g}, {delay.high:g}] s holds no whole number of control '
+                                     f'steps of {control_dt:g} s')
+            delay = (fewest + min(int(u_delay * (most - fewest + 1)), most - fewest)) * control_dt
+        return lag, delay
 
     def to_mapping(self) -> dict:
         """The world keys that reproduce it (those left at their nominal value left out)."""
@@ -78,9 +109,29 @@ class World:
             document['sensor_noise'] = {key: {'std': n.std, 'bias_std': n.bias_std}
                                         for key, n in self.sensor_noise.items()}
         for key in ('delay_s', 'motor_time_constant_s'):
-            if getattr(self, key):
-                document[key] = getattr(self, key)
+            value = getattr(self, key)
+            if isinstance(value, Range):
+                document[key] = {'low': value.low, 'high': value.high}
+            elif value:
+                document[key] = value
         return document
+
+
+def _largest(value: float | Range) -> float:
+    return value.high if isinstance(value, Range) else value
+
+
+def _actuator(value, key: str) -> float | Range:
+    """A number [s] in [0, 1], or ``{low: a, high: b}``: drawn per flight, uniformly in [a, b]."""
+    if isinstance(value, Mapping):
+        check_keys(value, key, ('low', 'high'))
+        for bound in ('low', 'high'):
+            if bound not in value:
+                raise ParameterError(f'{key}.{bound}: missing (a range is {{low: a, high: b}} [s])')
+        low = check_number(f'{key}.low', value['low'], 0.0, 1.0)
+        high = check_number(f'{key}.high', value['high'], low, 1.0)
+        return Range(low, high)
+    return check_number(key, 0.0 if value is None else value, 0.0, 1.0)
 
 
 def _noise(value, key: str) -> NoiseLevel:
@@ -99,7 +150,7 @@ def parse_world(document: Mapping[str, Any]) -> World:
         sensor_noise: {position_m: 0.01, velocity_mps: {std: 0.02, bias_std: 0.01}, attitude_rad: 0.01,
                        body_rate_radps: 0.02}
         delay_s: 0.004              # [s] a whole number of control steps
-        motor_time_constant_s: 0.03 # [s]
+        motor_time_constant_s: {low: 0.015, high: 0.045}   # [s] drawn per flight (delay_s too)
     """
     wind = check_keys(document.get('wind') or {}, 'wind', WIND_KEYS)
     turbulence = wind.get('turbulence', 'none')
@@ -107,14 +158,13 @@ def parse_world(document: Mapping[str, Any]) -> World:
         raise ParameterError(f'wind.turbulence: {turbulence!r} is not one of {", ".join(TURBULENCE)}')
     direction = wind.get('direction_deg')
     noise = check_keys(document.get('sensor_noise') or {}, 'sensor_noise', NOISE_KEYS)
-    delay, lag = document.get('delay_s'), document.get('motor_time_constant_s')
     return World(
         wind_mean_speed_mps=check_number('wind.mean_speed_mps', wind.get('mean_speed_mps', 0.0), 0.0),
         wind_direction_deg=None if direction is None else check_number('wind.direction_deg', direction),
         turbulence=turbulence,
         sensor_noise={key: _noise(value, f'sensor_noise.{key}') for key, value in noise.items()},
-        delay_s=check_number('delay_s', 0.0 if delay is None else delay, 0.0, 1.0),
-        motor_time_constant_s=check_number('motor_time_constant_s', 0.0 if lag is None else lag, 0.0, 1.0))
+        delay_s=_actuator(document.get('delay_s'), 'delay_s'),
+        motor_time_constant_s=_actuator(document.get('motor_time_constant_s'), 'motor_time_constant_s'))
 
 
 @dataclass
@@ -147,7 +197,8 @@ def build_perturbations(world: World, seed: int, flights: Sequence[int], vehicle
                         batch: bool) -> Perturbations:
     """The perturbation objects that fly ``world`` for ``flights`` of ``seed`` with their true ``vehicles`` and
     mean-wind ``directions`` [rad]: of one vehicle (``batch`` false, one flight) or of a batch (arrays, one
-    element and one random stream per flight, in order). ``control_dt``, ``physics_dt`` [s]."""
+    element and one random stream per flight, in order). ``control_dt``, ``physics_dt`` [s]. An actuator the
+    world draws per flight (:meth:`World.actuator`) is one value per vehicle; a fixed one, one for all."""
     def rngs(purpose: str):
         chosen = [flight_stream(seed, flight, purpose) for flight in flights]
         return chosen if batch else chosen[0]
@@ -163,11 +214,22 @@ def build_perturbations(world: World, seed: int, flights: Sequence[int], vehicle
     if world.has_wind:
         wind = Wind(physics_dt, mean_speed, direction, world.turbulence,
                     rngs('turbulence') if world.turbulence != 'none' else None)
-    return Perturbations(
-        true_vehicle=vehicle, sensor_noise=noise,
-        delay=TransportDelay.from_seconds(world.delay_s, control_dt) if world.delay_s > 0.0 else None,
-        motor_lag=MotorLag(world.motor_time_constant_s, physics_dt) if world.motor_time_constant_s > 0.0 else None,
-        wind=wind)
+    return Perturbations(true_vehicle=vehicle, sensor_noise=noise, wind=wind,
+                         **_actuators(world, seed, flights, control_dt, physics_dt, batch))
+
+
+def _actuators(world: World, seed: int, flights: Sequence[int], control_dt: float, physics_dt: float,
+               batch: bool) -> dict:
+    """The delay and motor lag of ``flights``: one for all when the world fixes them, else one per flight."""
+    delay, lag = world.delay_s, world.motor_time_constant_s
+    if isinstance(delay, Range) or isinstance(lag, Range):
+        lags, delays = zip(*(world.actuator(seed, flight, control_dt) for flight in flights))
+        steps = np.array([round(d / control_dt) for d in delays])
+        lag = np.array(lags) if batch else lags[0]
+        return {'delay': (TransportDelay(steps) if batch else TransportDelay(int(steps[0]))) if steps.any() else None,
+                'motor_lag': MotorLag(lag, physics_dt) if np.any(np.asarray(lag) > 0.0) else None}
+    return {'delay': TransportDelay.from_seconds(delay, control_dt) if delay > 0.0 else None,
+            'motor_lag': MotorLag(lag, physics_dt) if lag > 0.0 else None}
 
 
 def vehicle_changes(true_vehicle: VehicleParams, events: Mapping[str, Any], duration: float) -> tuple[VehicleChange, ...]:

@@ -10,6 +10,8 @@ from __future__ import annotations
 from collections import deque
 from typing import Sequence
 
+import numpy as np
+
 from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.validation import ParameterError, check_number, check_values
 
@@ -21,11 +23,16 @@ class TransportDelay:
     """A FIFO of ``steps`` control steps: the forces applied at step n are those computed at step n - k.
 
     The first k calls return zero thrust (k control steps with the motors off: a vehicle that
-    starts on the ground stays there). k = 0 returns the forces themselves.
+    starts on the ground stays there). k = 0 returns the forces themselves. ``steps`` is one whole
+    number for every vehicle, or (a batch) an integer array of one k per vehicle.
     """
 
-    def __init__(self, steps: int):
-        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+    def __init__(self, steps):
+        if isinstance(steps, np.ndarray):
+            if steps.ndim != 1 or steps.dtype.kind not in 'iu' or (steps < 0).any():
+                raise ParameterError(f'delay_steps: expected whole numbers of control steps >= 0, one per vehicle, '
+                                     f'got {steps!r}')
+        elif isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
             raise ParameterError(f'delay_steps: expected a whole number of control steps >= 0, got {steps!r}')
         self.steps = steps
         self._queue: deque = deque()
@@ -47,11 +54,25 @@ class TransportDelay:
 
     def __call__(self, forces: Sequence) -> tuple:
         """Push the forces [N] computed at this control step; return those to apply now."""
+        if isinstance(self.steps, np.ndarray):
+            return self._per_vehicle(forces)
         xp = namespace_for(forces[0])
         if not self._queue:
             self._queue.extend([tuple(xp.zeros_like(f) for f in forces)] * self.steps)
         self._queue.append(tuple(xp.copy(f) for f in forces))
         return self._queue.popleft()
+
+    def _per_vehicle(self, forces: Sequence) -> tuple:
+        """Vehicle v's forces of ``steps[v]`` control steps ago (zero thrust before its first)."""
+        deepest = int(self.steps.max())
+        if not self._queue:
+            self._queue.extend([tuple(np.zeros_like(f) for f in forces)] * deepest)
+        self._queue.append(tuple(np.array(f, dtype=float) for f in forces))
+        vehicles = np.arange(len(self.steps))
+        rows = len(self._queue) - 1 - self.steps         # the queue's row each vehicle reads
+        applied = tuple(np.stack([entry[i] for entry in self._queue])[rows, vehicles] for i in range(len(forces)))
+        self._queue.popleft()
+        return applied
 
 
 class MotorLag:

@@ -38,6 +38,7 @@ class FlightStreams(NamedTuple):
     turbulence: np.random.Generator    #: Dryden white noise (:class:`~.wind.DrydenTurbulence`)
     sensor_noise: np.random.Generator  #: odometry white noise (:class:`~.sensor_noise.SensorNoise`)
     sensor_bias: np.random.Generator   #: odometry per-flight bias (:class:`~.sensor_noise.SensorNoise`)
+    actuator: np.random.Generator      #: a flight's motor time constant and delay, when drawn (quad_sim.world)
 
 
 def flight_streams(seed: int, flight_index: int) -> FlightStreams:
