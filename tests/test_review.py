@@ -69,7 +69,7 @@ def test_the_main_job_writes_bag_and_report_whose_metrics_equal_the_live_summary
     assert_same_metrics(metrics, {key: summary[key] for key in metrics}, tolerance=0.0)
     assert {p.name for p in (out / 'plots').glob('*.png')} == PLOTS
     assert (out / 'report.md').read_text().count('![') == len(PLOTS)
-    assert 'scenario: paper; disturbances (paper section IV): enabled' in (out / 'report.md').read_text()
+    assert 'scenario: paper; vehicle: paper; disturbances (paper section IV): enabled' in (out / 'report.md').read_text()
 
     monkeypatch.undo()
     from_bag = review_bags([out / 'bag'], tmp_path / 'from-bag', plots=False)
