@@ -16,7 +16,7 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
                   settle_time: float, params: VehicleParams, disturbances: Disturbances, gains: dict,
                   physics_rate: float, wall_time_s: float, max_error: float, failure: str | None = None,
                   failure_time_s: float | None = None, planned_duration_s: float | None = None,
-                  plant: str = 'quad_sim', vehicle_file: str | Path | None = None) -> dict:
+                  plant: str = 'quad_sim', vehicle: str | None = None) -> dict:
     """Metrics of the flight (its metrics dict, e.g. ``Flight.metrics()``, or a FlightRecord to compute them
     from) plus everything needed to reproduce it (:func:`quad_msgs_bridge.review.summary.flight_summary`,
     which also builds a bag's summary).
@@ -28,9 +28,9 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
     ``failures`` says which, ``failure`` and ``failure_time_s`` why and when it ended early (None if
     it did not), ``ended_early`` the two in words; ``planned_duration_s`` [s] the length flown for
     (None: not given), as the review gives them (quad_msgs_bridge.review.verdict); ``plant``: what
-    the simulator flew (quad_sim.plants.PLANTS). ``vehicle`` names the vehicle: the shipped one of
-    ``vehicle_file`` (``--vehicle``) or else its path; without it, the shipped vehicle whose parameters
-    ``params`` are, else 'custom' (quad_msgs_bridge.vehicle_params.vehicle_name); ``vehicle_params``
+    the simulator flew (quad_sim.plants.PLANTS). ``vehicle`` names the vehicle (flight_stack.plan's
+    ``FlightPlan.vehicle_name``: the shipped one of ``--vehicle``, or its path); None: the shipped vehicle whose
+    parameters ``params`` are, else 'custom' (quad_msgs_bridge.vehicle_params.vehicle_name); ``vehicle_params``
     holds every parameter.
     """
     metrics = flight if isinstance(flight, dict) else flight_metrics(
@@ -45,7 +45,7 @@ def build_summary(flight: FlightRecord | dict, *, backend: str, controller: str,
         planned_duration_s=planned_duration_s, backend=backend, controller=controller, scenario=scenario,
         seed=seed, physics_rate_hz=physics_rate, plant=plant, wall_time_s=wall_time_s,
         real_time_factor=sim_time / wall_time_s if wall_time_s > 0 else None,
-        **vehicle_settings(params, vehicle_name(params, vehicle_file)),
+        **vehicle_settings(params, vehicle or vehicle_name(params)),
         disturbances=dataclasses.asdict(disturbances), gains=gains)
 
 

@@ -99,6 +99,8 @@ def test_a_topic_whose_layout_changes_is_read_message_by_message(tmp_path, monke
     monkeypatch.setattr(flight_from_bag, '_read_steps', lambda *a: taken.append(1) or original(*a))
     flight = read_flight(bag)
     assert taken and flight.steps == 500
+    assert flight.summary is None and any(note.startswith('no summary: the flight of 0.499 s is not longer than the '
+                                                          'settling window') for note in flight.warnings)
 
 
 def test_steps_whose_reference_was_lost_are_left_out_the_same_both_ways(tmp_path, monkeypatch):

@@ -58,6 +58,7 @@ from nnit2fsmc_controller.registry import check_controller
 from quad_sim.plants import DEFAULT_PLANT, check_plant
 from nnit2fsmc_controller.trajectory import SCENARIOS, make_scenario
 from quad_msgs_bridge.validation import ParameterError, check_keys, check_number
+from quad_msgs_bridge.yaml_files import load_yaml
 from quad_sim.world import NoiseLevel, World, parse_world
 
 #: spec key -> what it perturbs (documentation of the vehicle section)
@@ -322,7 +323,7 @@ def load_spec(path: str | Path) -> CampaignSpec:
     path = locate_spec(path)
     try:
         text = path.read_text()
-        document = yaml.safe_load(text)
+        document = load_yaml(text)
     except OSError as error:
         raise ParameterError(f'campaign spec {path}: {error.strerror} (shipped specs: '
                              f'{", ".join(p.stem for p in shipped_specs())})') from error

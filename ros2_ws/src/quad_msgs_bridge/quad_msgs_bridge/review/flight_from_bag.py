@@ -351,7 +351,8 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     (where a topic's messages share one layout; else, and for other storage, message by message). With
     ``progress`` (None: for a bag file over PROGRESS_BYTES) a progress bar on stderr shows the bytes read.
     Its ``summary`` is :func:`~quad_msgs_bridge.review.summary.bag_summary`: the keys of ``fly()``'s summary
-    that the bag (or the run's summary.json beside it) gives. ParameterError if ``bag`` is not a path.
+    that the bag (or the run's summary.json beside it) gives; None, with a warning saying why, for a flight too short
+    for metrics (no longer than its settling window). ParameterError if ``bag`` is not a path.
     """
     if not isinstance(bag, (str, os.PathLike)) or not str(bag).strip():
         raise ParameterError(f'read_flight: bag: expected the path of a bag folder or .mcap file (a str or Path), '
@@ -386,5 +387,8 @@ def read_flight(bag: str | Path, *, namespace: str | None = None, vehicle_file: 
     flight = log.flight(params, label=custom.get('controller') or bag.name, path=bag, custom_data=custom,
                         warnings=warnings)
     flight.ended_early = flight.ending is not None
-    flight.summary = bag_summary(flight)
+    try:
+        flight.summary = bag_summary(flight)
+    except ValueError as error:    # no metrics: e.g. a flight no longer than its settling window
+        flight.warnings.append(f'no summary: {error}')
     return flight
