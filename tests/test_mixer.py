@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from quad_msgs_bridge.mixer import (ALLOCATIONS, allocate, clip_allocation, controls_from_forces, forces_from_controls,
-                                     priority_allocation, saturate_forces)
+                                     pair_torques, priority_allocation, saturate_forces)
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 PARAMS, _ = load_vehicle_file()
@@ -226,3 +226,41 @@ def test_priority_allocation_properties_in_every_layout(layout):
         exact = forces_from_controls(*demand, mixer)
         if all(F_MIN <= f <= F_MAX for f in exact):
             np.testing.assert_allclose(forces, exact, atol=1e-15)
+
+
+def test_airmode_keeps_the_moments_when_the_thrust_asks_for_less_than_they_need():
+    """Issue 37: a z loop that asks for no thrust (U1 <= 0) leaves thrust-first allocation no moment at all: every
+    rotor at F_min. Airmode keeps the roll, pitch and yaw torques and raises the collective just enough."""
+    demand = (-1.0, 0.3, -0.2, 0.002)
+    assert priority_allocation(*demand, MIXER, F_MIN, F_MAX) == (F_MIN,) * 4
+    forces = allocate('airmode', *demand, MIXER, F_MIN, F_MAX)
+    u1, u2, u3, u4 = controls_from_forces(*forces, MIXER)
+    assert (u2, u3, u4) == pytest.approx(demand[1:], abs=1e-12)
+    assert min(forces) == pytest.approx(F_MIN, abs=1e-12) and all(f <= F_MAX for f in forces)   # the least lift
+
+
+@pytest.mark.parametrize('layout', LAYOUTS)
+def test_airmode_allocation_properties_in_every_layout(layout):
+    """For any demand, in every layout: rotor limits hold; (U2, U3) is the demand times one factor in [0, 1], 1 when
+    the pair torques fit in one rotor's range; U4 has the demand's sign and at most its size; U1 is the demand
+    clipped to what the realised moments leave (so a demand that fits is realised exactly)."""
+    params = LAYOUTS[layout]
+    mixer = params.mixer
+    rng = np.random.default_rng(37)
+    for _ in range(300):
+        demand = (rng.uniform(-2.0, 13.0), *rng.normal(0.0, 1.5, 2), rng.normal(0.0, 0.03))
+        forces = allocate('airmode', *demand, mixer, F_MIN, F_MAX)
+        u1, u2, u3, u4 = controls_from_forces(*forces, mixer)
+        assert all(F_MIN - 1e-12 <= f <= F_MAX + 1e-12 for f in forces)
+        factor = u2 / demand[1]
+        assert -1e-12 <= factor <= 1 + 1e-12 and u3 == pytest.approx(factor * demand[2], abs=1e-12)
+        t13, t24 = (abs(t) for t in pair_torques(demand[1], demand[2], mixer))
+        if max(t13, t24) <= F_MAX - F_MIN:
+            assert factor == pytest.approx(1.0, abs=1e-12)
+        assert u4 * demand[3] >= -1e-15 and abs(u4) <= abs(demand[3]) + 1e-15
+        differential = [f - u1 / 4 for f in forces]
+        allowed = (4 * (F_MIN - min(differential)), 4 * (F_MAX - max(differential)))
+        assert u1 == pytest.approx(min(max(demand[0], allowed[0]), allowed[1]), abs=1e-12)
+        exact = forces_from_controls(*demand, mixer)
+        if all(F_MIN <= f <= F_MAX for f in exact):
+            np.testing.assert_allclose(forces, exact, atol=1e-14)

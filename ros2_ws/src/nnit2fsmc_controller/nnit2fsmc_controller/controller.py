@@ -7,7 +7,8 @@ One law per subsystem (x, y, z, phi, theta, psi; :mod:`.axis_laws`) inside one s
 2. Desired roll and pitch (eq. 10 as it is meant, see below) from v_x, v_y and the measured yaw.
 3. Attitude loop: the phi, theta, psi laws give U2 [N], U3 [N], U4 [N m] (eq. 1 and 2 units).
 4. Rotor thrusts by the inverse of eq. (2) within the rotor limits: by thrust-priority allocation
-   (U1 first, then U2 and U3, U4 last; ``allocation='priority'``) or by clipping each rotor
+   (U1 first, then U2 and U3, U4 last; ``allocation='priority'``), by airmode allocation (U2 and U3
+   first, then U4, U1 last: attitude authority kept; ``'airmode'``) or by clipping each rotor
    (``'clip'``, paper-faithful); :func:`quad_msgs_bridge.mixer.allocate`.
 
 Eq. (10) as printed, phi_d = U_eq_psi + U_fuzzy and theta_d = U_eq_phi + U_fuzzy, names the wrong
@@ -62,7 +63,7 @@ from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.numeric import BATCH, namespace_for, select
 from quad_msgs_bridge.reference import REFERENCE_UNITS, ReferenceSample
 from quad_msgs_bridge.state import STATE_LAYOUT, STATE_NAMES
-from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, clip_allocation, controls_from_forces, priority_allocation
+from quad_msgs_bridge.mixer import ALLOCATIONS, allocate, allocate_by_index, controls_from_forces
 from quad_msgs_bridge.validation import ParameterError, check_number
 from quad_msgs_bridge.vehicle_params import VehicleParams
 
@@ -305,7 +306,7 @@ def flat_attitude_of(ax, ay, jx, jy, sx, sy, psi, dpsi, ddpsi, z, g, limit):
 
 
 #: positions in a CascadedController's kernel constants (:func:`cascade_step`)
-(_M, _G, _KFX, _KFY, _KFZ, _IX, _IY, _IZ, _KFPHI, _KFTHETA, _KFPSI, _D, _F_MIN, _F_MAX, _TAKEOFF, _FLATNESS, _PRIORITY,
+(_M, _G, _KFX, _KFY, _KFZ, _IX, _IY, _IZ, _KFPHI, _KFTHETA, _KFPSI, _D, _F_MIN, _F_MAX, _TAKEOFF, _FLATNESS, _ALLOCATION,
  _BLEND, _DT, _TILT, _HELD, _LAW_STORES, _LAW_CONSTANTS, _FILTERS) = (*range(20), 22, 28, 34, 40)
 _CONSTANTS_SIZE = 41
 #: positions of the reference in the inputs of :func:`cascade_step` (after the 12-state)
@@ -369,10 +370,8 @@ def cascade_step(store, law_constants, c, mixer, inputs):
                      (dphi * dpsi * (iz - ix) - c[_KFTHETA] * (dtheta * abs(dtheta))) / iy, c[_D] / iy)
     out_psi = _law(5, store, law_constants, c, wrap_angle(psi - psi_d), dpsi - yaw_rate, yaw_rate, yaw_acceleration,
                    (dphi * dtheta * (ix - iy) - c[_KFPSI] * (dpsi * abs(dpsi))) / iz, 1.0 / iz)
-    if c[_PRIORITY] != 0.0:
-        forces = priority_allocation(out_z[0], out_phi[0], out_theta[0], out_psi[0], mixer, c[_F_MIN], c[_F_MAX])
-    else:
-        forces = clip_allocation(out_z[0], out_phi[0], out_theta[0], out_psi[0], mixer, c[_F_MIN], c[_F_MAX])
+    forces = allocate_by_index(int(c[_ALLOCATION]), out_z[0], out_phi[0], out_theta[0], out_psi[0], mixer, c[_F_MIN],
+                               c[_F_MAX])
     controls = controls_from_forces(forces[0], forces[1], forces[2], forces[3], mixer)
     return forces, controls, (out_x, out_y, out_z, out_phi, out_theta, out_psi), (phi_d, theta_d, psi_d)
 
@@ -442,7 +441,7 @@ class CascadedController:
         constants = np.zeros(_CONSTANTS_SIZE)
         constants[:_TILT + 3] = (p.m, p.g, p.Kfx, p.Kfy, p.Kfz, p.Ix, p.Iy, p.Iz, p.Kfphi, p.Kftheta, p.Kfpsi, p.d,
                                  p.F_min, p.F_max, self.takeoff_height, self.attitude_rates == 'flatness',
-                                 self.allocation == 'priority', self._filters['dphi'].blend, self.dt,
+                                 ALLOCATIONS.index(self.allocation), self._filters['dphi'].blend, self.dt,
                                  *self.tilt_limit.kernel_parameters)
         constants[_HELD:_HELD + 6] = [law in self._held_on_ground for law in laws]
         constants[_LAW_STORES:_LAW_STORES + 6] = offsets[:6]

@@ -19,7 +19,8 @@ from quad_msgs_bridge.numeric import every, select
 from quad_msgs_bridge.rotor_layout import PAIRS, PITCH, ROLL, SPIN, YAW, YAW_COEFFICIENT, rotor_names
 
 ROTOR_NAMES = rotor_names('plus')   #: F1..F4 of the paper's "+" frame (a vehicle's own: VehicleParams.rotor_names)
-ALLOCATIONS = ('priority', 'clip')   #: how U1..U4 beyond the rotor limits become thrusts (:func:`allocate`)
+#: how U1..U4 beyond the rotor limits become thrusts (:func:`allocate`); a kernel names one by its index
+ALLOCATIONS = ('priority', 'clip', 'airmode')
 CONTROL_NAMES = ('U1', 'U2', 'U3', 'U4')
 CONTROL_UNITS = ('N', 'N', 'N', 'N m')   #: of U1..U4
 
@@ -138,11 +139,52 @@ def priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
             select(fits, demanded[2], forces[2]), select(fits, demanded[3], forces[3]))
 
 
-def allocate(allocation, u1, u2, u3, u4, mixer, f_min, f_max):
-    """Rotor thrusts [N] for U1..U4 by ``allocation``: 'priority' (:func:`priority_allocation`) or
-    'clip' (:func:`clip_allocation`), in the layout ``mixer`` (``VehicleParams.mixer``)."""
-    if allocation == 'priority':
+@njit(cache=True, error_model='numpy')
+def airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
+    """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m]: roll and pitch first, then yaw, the collective
+    thrust last (airmode: attitude authority is kept whatever U1 asks, even U1 <= 0).
+
+    With the notation of :func:`priority_allocation`, F_i = m + d_i where the differential parts are
+    d = (-t13/2 - y, -t24/2 + y, t13/2 - y, t24/2 + y) and W = f_max - f_min is the range of one rotor.
+    The spread of the d_i is max(|t13|, |t24|, (|t13| + |t24|)/2 + 2|y|), so:
+
+    1. U2 and U3 are scaled by s = min(1, W / max(|t13|, |t24|)) (the torque's direction is kept);
+    2. the yaw shift is the demanded y clipped to |y| <= (W - s (|t13| + |t24|)/2) / 2 (cut, never reversed);
+    3. the mean thrust is U1/4 clipped to [f_min - min_i d_i, f_max - max_i d_i], an interval that steps 1-2
+       make non-empty: U1 is raised when it is too low for the moments, lowered when too high, else kept.
+
+    A demand that fits is realised exactly (the inverse of eq. 2). Floats or arrays (elementwise, one element
+    per vehicle)."""
+    t13, t24 = pair_torques(u2, u3, mixer)
+    yaw = mixer[SPIN] * (0.25 * u4 / mixer[YAW_COEFFICIENT])
+    span = f_max - f_min
+    pitch, roll = np.abs(t13), np.abs(t24)
+    scale = _most(span, np.maximum(pitch, roll))
+    half13, half24 = 0.5 * scale * t13, 0.5 * scale * t24
+    room = np.maximum(0.5 * (span - 0.5 * scale * (pitch + roll)), 0.0)
+    shift = clipped(yaw, -room, room)
+    d = (-half13 - shift, -half24 + shift, half13 - shift, half24 + shift)
+    lowest = np.minimum(np.minimum(d[0], d[1]), np.minimum(d[2], d[3]))
+    highest = np.maximum(np.maximum(d[0], d[1]), np.maximum(d[2], d[3]))
+    mean = clipped(0.25 * u1, f_min - lowest, f_max - highest)
+    return saturated((mean + d[0], mean + d[1], mean + d[2], mean + d[3]), f_min, f_max)   # rounding only
+
+
+@njit(cache=True, error_model='numpy')
+def allocate_by_index(index, u1, u2, u3, u4, mixer, f_min, f_max):
+    """:func:`allocate` for the allocation ALLOCATIONS[index] (what a compiled kernel holds)."""
+    if index == 0:
         return priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
-    if allocation == 'clip':
+    if index == 1:
         return clip_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
-    raise ValueError(f'allocation {allocation!r} is not one of {", ".join(ALLOCATIONS)}')
+    return airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
+
+
+def allocate(allocation, u1, u2, u3, u4, mixer, f_min, f_max):
+    """Rotor thrusts [N] for U1..U4 by ``allocation``: 'priority' (:func:`priority_allocation`), 'clip'
+    (:func:`clip_allocation`) or 'airmode' (:func:`airmode_allocation`), in the layout ``mixer``
+    (``VehicleParams.mixer``)."""
+    if allocation not in ALLOCATIONS:
+        raise ValueError(f'allocation {allocation!r} is not one of {", ".join(ALLOCATIONS)}')
+    return (priority_allocation, clip_allocation, airmode_allocation)[ALLOCATIONS.index(allocation)](
+        u1, u2, u3, u4, mixer, f_min, f_max)
