@@ -58,9 +58,10 @@ DELAY_STEPS = 20          #: [control steps at 1 kHz] = 20 ms
 MOTOR_LAG = 0.030         #: [s]
 
 
-def configurations() -> dict:
-    """{name: flat gains}: defaults, paper-faithful, and each change reverted alone and added alone."""
-    defaults = factory.flatten_gains(factory.load_gains())
+def configurations(gains_name: str | None = None) -> dict:
+    """{name: flat gains}: defaults (the gains ``gains_name``, a file or a named set; None: the packaged ones),
+    paper-faithful, and each change reverted alone and added alone."""
+    defaults = factory.flatten_gains(factory.load_gains(gains_name))
     faithful = {**defaults, **factory.PAPER_FAITHFUL}
     missing = set(factory.PAPER_FAITHFUL) - {key for keys in CHANGES.values() for key in keys}
     if missing:
@@ -103,10 +104,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--campaign-seed', type=int, default=2, help='a tuning seed (default 2)')
     parser.add_argument('--only', help='comma-separated configuration names (default: all)')
     parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--gains', default=None, help='the defaults\' gains file or named set (default: packaged; '
+                                                      'docs/PAPER.md says which set each table flew)')
 
 
 def run(args: argparse.Namespace) -> int:
-    configs = configurations()
+    configs = configurations(args.gains)
     if args.only:
         configs = {name: configs[name.strip()] for name in args.only.split(',')}
     folder = Path(tempfile.mkdtemp(prefix='ablation-'))

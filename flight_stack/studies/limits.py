@@ -53,10 +53,11 @@ PREVIOUS = {'nnit2fsmc.acceleration_feedforward': False, 'nnit2fsmc.initial_weig
             'nnit2fsmc.axes.x.learning_rate': 10.0, 'nnit2fsmc.axes.y.learning_rate': 10.0}
 
 
-def yaw_error_under_bias(kind: str) -> tuple[float, float]:
-    """(mean true yaw error [rad] of the last 5 s, the formula's) for a hover with BIAS on the yaw rate."""
+def yaw_error_under_bias(kind: str, gains_name: str | None = None) -> tuple[float, float]:
+    """(mean true yaw error [rad] of the last 5 s, the formula's) for a hover with BIAS on the yaw rate, with the
+    gains ``gains_name`` (a gains file or a named set; None: the packaged ones)."""
     params, disturbances = load_vehicle_file()
-    gains = load_gains()
+    gains = load_gains(gains_name)
     controller = build_controller(kind, params, gains)
     simulator = Simulator(QuadrotorModel(params, disturbances.switched(False)), controller.dt,
                           [0.0, 0.0, 1.0] + [0.0] * 9)
@@ -75,10 +76,11 @@ def yaw_error_under_bias(kind: str) -> tuple[float, float]:
 
 
 def helix_rmse(task) -> tuple[float, str | None]:
-    """(RMSE [cm] after 5 s, failure) of (kind, previous network?, wind [m/s], angular rate [rad/s], duration)."""
-    kind, previous, wind, rate, duration = task
+    """(RMSE [cm] after 5 s, failure) of (kind, previous network?, wind [m/s], angular rate [rad/s], duration,
+    gains file or named set)."""
+    kind, previous, wind, rate, duration, gains_name = task
     params, disturbances = load_vehicle_file()
-    gains = load_gains()
+    gains = load_gains(gains_name)
     if previous:
         gains = unflatten_gains({**flatten_gains(gains), **PREVIOUS})
     perturbations = Perturbations(wind=Wind(1e-3, mean_speed=wind, direction=0.0) if wind else None)
@@ -90,21 +92,25 @@ def helix_rmse(task) -> tuple[float, str | None]:
     return 100.0 * metrics['rmse_position_m'], result.failure
 
 
-def _bias_task(kind):
-    return yaw_error_under_bias(kind)
+def _bias_task(task):
+    return yaw_error_under_bias(*task)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_out(parser)
     parser.add_argument('--duration', type=float, default=30.0, help='[s] helix flights (default 30)')
     parser.add_argument('--jobs', type=int, default=1)
+    parser.add_argument('--gains', default=None, help='gains file or named set (default: packaged; docs/PAPER.md '
+                                                      'says which set each table flew)')
 
 
 def run(args: argparse.Namespace) -> int:
+    load_gains(args.gains)     # a named set or a file: refused here, before anything flies
     rows = [(kind, False) for kind in CONTROLLERS] + [('nnit2fsmc', True)]
-    bias = run_all(_bias_task, list(CONTROLLERS), args.jobs, STUDY, lambda kind: f'{kind}: hover with a gyro bias')
-    tasks = [(kind, nn, WIND, 0.5, args.duration) for kind, nn in rows] + \
-            [(kind, nn, 0.0, FAST, args.duration) for kind, nn in rows]
+    bias = run_all(_bias_task, [(kind, args.gains) for kind in CONTROLLERS], args.jobs, STUDY,
+                   lambda task: f'{task[0]}: hover with a gyro bias')
+    tasks = [(kind, nn, WIND, 0.5, args.duration, args.gains) for kind, nn in rows] + \
+            [(kind, nn, 0.0, FAST, args.duration, args.gains) for kind, nn in rows]
     flown = dict(zip(tasks, run_all(helix_rmse, tasks, args.jobs, STUDY,
                                     lambda t: f'{t[0]}{", previous network" if t[1] else ""}: helix at {t[3]:g} '
                                               f'rad/s in {t[2]:g} m/s wind')))
@@ -117,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     for kind, nn in rows:
         name = f'{kind}, previous x, y network' if nn else kind
         cells = []
-        for task in ((kind, nn, WIND, 0.5, args.duration), (kind, nn, 0.0, FAST, args.duration)):
+        for task in ((kind, nn, WIND, 0.5, args.duration, args.gains), (kind, nn, 0.0, FAST, args.duration, args.gains)):
             rmse, failure = flown[task]
             cells.append(f'{rmse:.3g}' + (f' ({failure})' if failure else ''))
         lines.append(f'| {name} | {cells[0]} | {cells[1]} |')
