@@ -51,21 +51,22 @@ def test_the_installed_example_is_found_by_its_entry_point_and_said_where_it_cam
     assert done.returncode == 0, done.stderr
     line = next(line for line in done.stdout.splitlines() if line.startswith('geometric-pd '))
     assert 'entry point quad_pd_example:GeometricPD of quad-pd-example 0.1.0' in line
-    assert 'cascaded PD' in line
+    assert 'cascaded PID/PD' in line
     kind = controller_kind('geometric-pd')
     assert kind.gains_section == 'geometric_pd' and not kind.batched
-    assert [d.name for d in kind.search_space] == ['position.kp', 'position.kd', 'height.kp', 'height.kd']
+    assert [d.name for d in kind.search_space] == ['position.kp', 'position.ki', 'position.kd', 'height.kp', 'height.ki',
+                                                   'height.kd']
 
 
 def test_fly_flies_it_by_entry_point_by_module_class_and_by_class_alike(installed):
     from quad_pd_example import GeometricPD
-    flights = [fly(name, 'hover', duration=4.0, disturbances=False)
+    flights = [fly(name, 'hover', duration=8.0, disturbances=False)
                for name in ('geometric-pd', 'quad_pd_example:GeometricPD', GeometricPD)]
     rmse = [flight.summary['rmse_position_m'] for flight in flights]
     assert all(flight.summary['flight_ok'] for flight in flights)
     assert rmse[0] == rmse[1] == rmse[2] < 0.01    # the same law, however it is named; no disturbance to fight
     assert flights[0].summary['controller'] == 'geometric-pd'
-    assert flights[0].summary['gains']['geometric_pd']['position'] == {'kp': 6.0, 'kd': 4.0}
+    assert flights[0].summary['gains']['geometric_pd']['position'] == {'kp': 25.0, 'ki': 15.0, 'kd': 10.0}
 
 
 def test_one_of_its_gains_changes_by_mapping_and_by_set_and_a_bad_one_is_refused_by_name(installed):
@@ -73,7 +74,7 @@ def test_one_of_its_gains_changes_by_mapping_and_by_set_and_a_bad_one_is_refused
     by_mapping = fly('geometric-pd', 'hover', duration=3.0, gains=one_key)
     tree = load_gains(None, kind='geometric-pd')
     by_set = fly('geometric-pd', 'hover', duration=3.0, gains=with_settings(tree, ['geometric_pd.position.kp=12']))
-    assert by_mapping.summary['gains']['geometric_pd']['position'] == {'kp': 12.0, 'kd': 4.0}
+    assert by_mapping.summary['gains']['geometric_pd']['position'] == {'kp': 12.0, 'ki': 15.0, 'kd': 10.0}
     assert by_mapping.summary['rmse_position_m'] == by_set.summary['rmse_position_m']
     assert by_mapping.summary['rmse_position_m'] != fly('geometric-pd', 'hover', duration=3.0).summary['rmse_position_m']
     with pytest.raises(ParameterError, match=r'geometric_pd\.position\.kpp: unknown gain .*did you mean '
