@@ -60,6 +60,7 @@ from flight_stack import embedded
 from flight_stack.closed_loop import FailureRules
 from flight_stack.embedded import Perturbations, fly_embedded
 from nnit2fsmc_controller import factory
+from nnit2fsmc_controller.registry import check_controller
 from nnit2fsmc_controller import trajectory as trajectories
 from quad_msgs_bridge.review.metrics import default_settle_time, flight_metrics, has_fuzzy_term
 from quad_msgs_bridge.validation import ParameterError
@@ -470,10 +471,10 @@ def run(args: argparse.Namespace) -> int:
     experiments = names(args.experiments)
     unknown = [e for e in experiments if e not in EXPERIMENTS]
     controllers = names(args.controllers) if args.controllers else list(factory.CONTROLLERS)
-    unknown += [c for c in controllers if kind_of(c) not in factory.CONTROLLERS]
     if unknown:
-        raise ParameterError(f'unknown experiment or controller: {", ".join(unknown)} '
-                             f'(experiments: {", ".join(EXPERIMENTS)}; controllers: {", ".join(factory.CONTROLLERS)})')
+        raise ParameterError(f'unknown experiment: {", ".join(unknown)} (experiments: {", ".join(EXPERIMENTS)})')
+    for controller in controllers:         # any registered kind: a built-in one, an installed one, module:Class
+        check_controller(kind_of(controller), '--controllers')
     if args.duration is not None and not args.duration > 0.0:
         raise ParameterError('--duration must be positive')
     scenarios = {e: tuple(names(args.scenarios)) if args.scenarios else DEFAULT_SCENARIOS[e] for e in experiments}

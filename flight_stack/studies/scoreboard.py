@@ -49,6 +49,7 @@ from flight_stack.campaign.results import FLIGHTS_FILE
 from flight_stack.campaign.runner import RunOptions, holds_campaign, run_campaign
 from flight_stack.campaign.spec import load_spec
 from flight_stack.campaign.stress import BREAKING_POINTS_FILE, KINDS as DISTURBANCES
+from nnit2fsmc_controller.registry import check_controller
 from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE, flatten_gains, load_gains, locate_gains
 from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values
 from quad_msgs_bridge.validation import ParameterError
@@ -523,6 +524,8 @@ def settings_of(args) -> Settings:
     kinds = tuple(names(args.kinds))
     if not kinds:
         raise ParameterError('--kinds: give at least one controller kind (the first is the paired reference)')
+    for kind in kinds:                     # any registered kind: a built-in one, an installed one, module:Class
+        check_controller(kind, '--kinds')
     for name, value in (('--flights', args.flights), ('--stress-flights', args.stress_flights)):
         if value < 1:
             raise ParameterError(f'{name}: {value} must be a whole number >= 1')
