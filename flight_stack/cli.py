@@ -90,6 +90,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                              'repeatable; applied over --gains')
     parser.add_argument('--plant', choices=PLANTS, default=DEFAULT_PLANT,
                         help='what the simulator flies: our model of eq. (1), or RotorPy (docs/ROTORPY.md)')
+    parser.add_argument('--px4-dir', type=Path, default=None,
+                        help='--plant px4-sitl: the PX4-Autopilot folder holding build/px4_sitl_default (default: env '
+                             'PX4_DIR; docs/PX4.md)')
+    parser.add_argument('--xrce-agent', type=Path, default=None,
+                        help='--plant px4-sitl: the Micro XRCE-DDS Agent executable (default: MicroXRCEAgent on PATH)')
     parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz], a multiple of the control rate')
     parser.add_argument('--settle-time', type=float, default=None,
                         help='metrics ignore the first S seconds (default: 5, or half of a flight shorter than 10 s)')
@@ -182,6 +187,41 @@ def check_backend_options(args, backend: str) -> None:
         option, value = ros_only[0]
         raise ParameterError(f'{option} {value}: an option of the ROS backend, which the embedded backend would '
                              'ignore; fly with --backend ros, or leave it out')
+
+
+#: [Hz] the controller rate on PX4 SITL: our controllers answer each odometry, which PX4 1.15 sends at 100 Hz
+#: (EKF2_PREDICT_US 10 ms; docs/PX4.md "Rates"); common.control_rate is set to it unless --set names it
+PX4_CONTROL_RATE = 100.0
+
+
+def check_px4_options(args):
+    """For --plant px4-sitl: PX4, the Agent and px4_msgs found (flight_stack.px4_sitl.find_px4: one line naming what
+    is missing) and the options it flies with checked and set (ROS backend, realtime, publication logs, one
+    vehicle, no simulated disturbances, the controller at PX4's odometry rate); None for another plant."""
+    from quad_msgs_bridge.validation import ParameterError
+    from quad_sim.plants import PX4_SITL
+    if args.plant != PX4_SITL:
+        for option, value in (('--px4-dir', args.px4_dir), ('--xrce-agent', args.xrce_agent)):
+            if value is not None:
+                raise ParameterError(f'{option}: an option of --plant {PX4_SITL}')
+        return None
+    from flight_stack.px4_sitl import find_px4
+    install = find_px4(args.px4_dir, args.xrce_agent)
+    refused = [(args.backend == 'embedded', '--backend embedded: PX4 SITL is flown over ROS 2 (--backend ros)'),
+               (args.mode == 'lockstep', '--mode lockstep: PX4 SITL runs in real time (--mode realtime)'),
+               (args.record_by == 'recorder', '--record-by recorder: a PX4 flight is recorded by its publishers'),
+               (args.vehicles != 1, '--vehicles: one PX4 SITL flies one vehicle'),
+               (args.live, '--live: the live view serves the embedded flight'),
+               (args.disturbances, '--disturbances: SIH cannot apply the paper\'s disturbances (PX4 flies its own '
+                                   'plant as it is)'),
+               (args.speed_factor not in (None, 1.0), '--speed-factor: PX4 SITL runs at 1x real time here')]
+    for bad, why in refused:
+        if bad:
+            raise ParameterError(f'--plant {PX4_SITL}: {why}')
+    args.backend, args.mode, args.record_by, args.disturbances = 'ros', 'realtime', 'publishers', False
+    if not any(setting.startswith('common.control_rate=') for setting in args.gain_settings):
+        args.gain_settings = [*args.gain_settings, f'common.control_rate={PX4_CONTROL_RATE:g}']
+    return install
 
 
 def check_live_options(args, backend: str) -> float:
@@ -294,6 +334,7 @@ def run(argv: list[str]) -> int:
     from quad_msgs_bridge.validation import ParameterError, check_number
     try:
         args.controller = choose_controller(args.controller, args.gains)
+        px4 = check_px4_options(args)
         plan = plan_flight(args.controller, args.scenario, duration=args.duration, disturbances=args.disturbances,
                            seed=args.seed, vehicle_file=args.vehicle, gains_file=args.gains,
                            physics_rate=args.physics_rate, settle_time=args.settle_time, max_error=args.max_error,
@@ -305,6 +346,8 @@ def run(argv: list[str]) -> int:
             raise ParameterError('--live: the live view shows one vehicle; fly a fleet without --live')
         speed_factor = check_live_options(args, backend)
         check_backend_options(args, backend)
+        if px4 is not None:
+            args.px4 = px4
         if backend == 'ros':
             args.speed_factor = check_number('--speed-factor', 1.0 if args.speed_factor is None else args.speed_factor,
                                              0.0, low_inclusive=False)
@@ -326,7 +369,7 @@ def run(argv: list[str]) -> int:
         print(f'note: earlier runs into {output.out_dir} that did not finish left '
               + ', '.join(str(folder) for folder in output.leftovers)
               + ' (a bag there can be reviewed or recovered; remove them when no longer needed)', file=sys.stderr)
-    print(f'flying {plan.controller} on "{plan.scenario}" for {plan.duration:g} s '
+    print(f'flying {plan.controller} on "{plan.scenario}" for {plan.duration:g} s, vehicle {plan.vehicle_name} '
           f'(disturbances {"on" if plan.disturbances.enabled else "off"}), {backend} backend'
           + (f', {args.vehicles} vehicles' if args.vehicles > 1 else '')
           + (f', plant {plan.plant}' if plan.plant != 'quad_sim' else ''))
@@ -341,7 +384,7 @@ def launch_of(args: argparse.Namespace) -> Launch:
     """The backend options of the command line."""
     return Launch(vehicles=args.vehicles, namespace=args.namespace, quiet=args.quiet, mode=args.mode,
                   speed_factor=args.speed_factor, extra_subscribers=args.extra_subscribers, record_by=args.record_by,
-                  vehicle_file=args.vehicle)
+                  vehicle_file=args.vehicle, px4=getattr(args, 'px4', None))
 
 
 def unfinished(output, message: str, code: int) -> int:

@@ -25,8 +25,11 @@ def rows(what: str) -> list[tuple[str, str]]:
     """(name, description) of every thing of kind ``what`` (one of WHAT)."""
     if what == 'controllers':
         from nnit2fsmc_controller.registry import installed_kinds
+        from quad_sim.plants import PX4_CONTROLLER, PX4_SITL
         return [(kind.name, kind.description + ('' if kind.source == 'built in' else f' [{kind.source}]'))
-                for kind in installed_kinds()]
+                for kind in installed_kinds()] + [
+            (PX4_CONTROLLER, f'PX4\'s own cascaded position/velocity/attitude/rate controller, flown inside PX4 '
+                             f'(--plant {PX4_SITL} only; docs/PX4.md)')]
     if what == 'vehicles':
         from quad_msgs_bridge.vehicle_params import shipped_vehicles
         return [(name, f'{first_comment_line(path)} ({path})') for name, path in shipped_vehicles().items()]

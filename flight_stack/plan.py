@@ -18,8 +18,8 @@ from quad_msgs_bridge.bag.flight_bag import select_topics
 from quad_msgs_bridge.contract import TopicSpec
 from quad_msgs_bridge.review.metrics import default_settle_time
 from quad_msgs_bridge.validation import ParameterError, check_number
-from quad_msgs_bridge.vehicle_params import Disturbances, VehicleParams, load_vehicle_file
-from quad_sim.plants import DEFAULT_PLANT, check_plant, check_plant_installed
+from quad_msgs_bridge.vehicle_params import vehicle_name, Disturbances, VehicleParams, load_vehicle_file
+from quad_sim.plants import DEFAULT_PLANT, PX4_CONTROLLER, PX4_SITL, check_plant, check_plant_installed
 from quad_sim.world import Perturbations, build_perturbations, parse_world, vehicle_changes, wind_direction
 
 
@@ -45,6 +45,7 @@ class FlightPlan:
     topics: tuple[TopicSpec, ...]
     perturbations: Perturbations | None = None   #: the flown world, when it differs from the nominal one
     plant: str = DEFAULT_PLANT   #: what the simulator flies (quad_sim.plants.PLANTS)
+    vehicle_name: str = 'paper'  #: what summaries, consoles and reports call the nominal vehicle (vehicle_name)
 
 
 def _vehicle(argument: str, value) -> VehicleParams:
@@ -144,18 +145,25 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
         raise ParameterError(f'vehicle: expected a VehicleParams or a vehicle YAML path, got {vehicle_file!r}')
     if disturbances is not None:
         vehicle_disturbances = vehicle_disturbances.switched(disturbances)
-    check_controller(controller)
+    if controller == PX4_CONTROLLER:   # PX4's own controller, inside PX4: no kind of the registry builds it
+        if plant != PX4_SITL:
+            raise ParameterError(f'--controller {PX4_CONTROLLER}: PX4\'s own controller runs inside PX4; it flies only '
+                                 f'with --plant {PX4_SITL}')
+    else:
+        check_controller(controller)
     if not (gains_file is None or isinstance(gains_file, (str, Path, Mapping))):
         raise ParameterError(f'gains: expected a gains mapping or a gains YAML path, got {gains_file!r}')
     try:
-        gains = with_settings(load_gains(gains_file, kind=controller), gain_settings)
+        gains = with_settings(load_gains(gains_file, kind=None if controller == PX4_CONTROLLER else controller),
+                              gain_settings)
     except ParameterError as error:
         raise ParameterError(f'gains: {error}') from error
     gains.setdefault('nnit2fsmc', {})['seed'] = seed
     source = ('the given mapping' if isinstance(gains_file, Mapping) else gains_file
               or 'the packaged controller.yaml')
     try:
-        build_controller(controller, params, gains)
+        if controller != PX4_CONTROLLER:
+            build_controller(controller, params, gains)
     except ParameterError as error:
         raise ParameterError(f'gains ({source}): {error}') from error
     control_rate = 1.0 / control_period(gains)
@@ -172,5 +180,6 @@ def plan_flight(controller: str = 'nnit2fsmc', scenario: str = 'paper', *, durat
         disturbances=vehicle_disturbances, gains=gains, seed=seed, duration=duration,
         physics_rate=physics_rate, control_rate=control_rate,
         settle_time=check_settle_time(settle_time, duration, control_rate), max_error=max_error,
-        topics=select_topics(topics), perturbations=perturbations, plant=plant)
+        topics=select_topics(topics), perturbations=perturbations, plant=plant,
+        vehicle_name=vehicle_name(params, vehicle_file if isinstance(vehicle_file, (str, Path)) else None))
 

@@ -18,6 +18,16 @@ Who writes the bag (``record_by``):
   bag holds every step. It is stopped last, so that it drains what is still in flight and finalizes the bag.
 
 The summary is computed from the bag: what was observed on the topics.
+
+PX4 SITL (``plant`` px4-sitl, ``px4`` where it is: flight_stack.px4_sitl): the Agent and PX4 SITL start first, in
+their own instance, port and ROS domain (every node of the flight gets that ROS_DOMAIN_ID); the PX4 bridge node
+(quad_sim.px4_node) takes the simulator's place and ends the flight: it arms PX4 in offboard, publishes ``odom``
+in flight time from PX4's odometry, lands after ``duration`` and exits once PX4 has disarmed. The controller runs
+in realtime (``latest_only``) and answers each odometry; with ``controller`` px4 there is no controller node and
+the bridge sends our reference to PX4's own controller. If the controller or trajectory node dies in flight, the
+bridge is left to hand the vehicle to PX4's land mode (its ``forces_timeout``) and to disarm before the rest is
+stopped: the flight is still reported as failed. The bag holds PX4's messages too (the bridge logs them; their
+schemas come from the px4_msgs install), under PX4's first-instance names ``/fmu/...``.
 """
 from __future__ import annotations
 
@@ -34,6 +44,8 @@ from quad_msgs_bridge.bag.flight_bag import DURATION_KEY, MAX_ERROR_KEY, disturb
 from quad_msgs_bridge.bag.merge import merge_parts
 from quad_msgs_bridge.contract import RECORDED_TOPICS, vehicle_namespaces
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
+
+from quad_sim.plants import PX4_CONTROLLER, PX4_SITL
 
 from .fleet import FleetVehicle, fleet_home
 from .processes import NodeProcess, node_command, source_tree_environment, stop_all, wait_for_exit
@@ -69,6 +81,7 @@ class RosFlightConfig:
     record_by: str = 'publishers'
     publish_tf: bool = True   #: the simulator broadcasts every vehicle's odom -> <ns>/base_link on /tf
     plant: str = 'quad_sim'   #: what the simulator node flies (its parameter plant; quad_sim.plants.PLANTS)
+    px4: object = None        #: plant px4-sitl: flight_stack.px4_sitl.Px4Install
     max_error: float | None = None   #: [m] the run's --max-error, noted in the bag for its review
 
 
@@ -79,6 +92,9 @@ class RosFlightResult:
     exit_codes: dict[str, int]
     sim_report: str
     sim_log: tuple[str, ...] = ()    #: every line the simulator printed
+    #: PX4 SITL: why the flight ended in a failsafe (the PX4 bridge's, e.g. PX4 disarmed after a crash), if it did:
+    #: an outcome of the flight (it is summarised and reviewed as failed), not a node failure
+    flight_failure: str | None = None
 
 
 def _ros_args(namespace: str, params: dict) -> list[str]:
@@ -94,8 +110,16 @@ def _ros_args(namespace: str, params: dict) -> list[str]:
     return args
 
 
+#: [s, wall] after a dead controller, for the PX4 bridge to land and disarm the vehicle before it is stopped
+PX4_LANDING_TIMEOUT = 60.0
+#: [s, wall] for PX4 SITL to start and pass its pre-flight checks, and to land after the flight
+PX4_OVERHEAD = 120.0
+
+
 def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     """Fly with every node in its own process; the bag at ``config.bag`` holds what went over the topics."""
+    if config.plant == PX4_SITL:
+        return fly_px4(config)
     env = source_tree_environment()
     vehicle = {'vehicle_file': str(config.vehicle_file)} if config.vehicle_file else {}
     home, names = fleet_home(config.vehicles)
@@ -174,12 +198,99 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     return RosFlightResult(wall, failed, codes, report, tuple(processes[-1].lines) if processes else ())
 
 
+def fly_px4(config: RosFlightConfig) -> RosFlightResult:
+    """A flight on PX4 SITL (module docstring): the Agent and PX4 first, then the trajectory node, the controller
+    node (none for the px4 kind) and the PX4 bridge, which ends the flight."""
+    from quad_msgs_bridge.px4 import PX4_RECORDED_TOPICS, install_px4_bag_types
+    from .px4_sitl import Px4Sitl, take_slot
+    if config.px4 is None or len(config.vehicles) != 1 or config.record_by != 'publishers' or not config.record:
+        raise ValueError('a PX4 SITL flight needs px4 (find_px4), one vehicle and record_by publishers')
+    [vehicle] = config.vehicles
+    home = vehicle.namespace
+    trajectory = make_scenario(config.scenario, offset=vehicle.offset)
+    parts = part_directory(config.bag)
+    shutil.rmtree(parts, ignore_errors=True)
+    logged = {'record_dir': str(parts)}
+    vehicle_param = {'vehicle_file': str(config.vehicle_file)} if config.vehicle_file else {}
+    slot = take_slot()
+    sitl = Px4Sitl(config.px4, slot, source_tree_environment(), quiet=config.quiet)
+    env = sitl.env
+    own = config.controller == PX4_CONTROLLER
+    nodes = [('trajectory', 'nnit2fsmc_controller', 'trajectory', 'nnit2fsmc_controller.trajectory_node',
+              {'use_sim_time': False, 'scenario': config.scenario, 'duration': config.duration,
+               'setpoint_rate': config.setpoint_rate, 'start_time': 0.0, 'offset': list(vehicle.offset), **logged})]
+    if not own:
+        nodes.append(('controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller',
+                      'nnit2fsmc_controller.controller_node',
+                      {'use_sim_time': False, 'controller': config.controller, 'nnit2fsmc.seed': config.seed,
+                       'latest_only': True, **vehicle_param, **logged,
+                       **({'gains_file': str(config.gains_file)} if config.gains_file else {})}))
+    nodes.append(('px4_bridge', 'quad_sim', 'px4_bridge', 'quad_sim.px4_node',
+                  {'control_level': 'position' if own else 'direct_actuator', 'duration': config.duration,
+                   'exit_at_end': True, 'initial_position': [float(v) for v in trajectory.initial_state[0:3]],
+                   'initial_yaw': float(trajectory.initial_state[8]),
+                   'target_system': slot.target_system, 'px4_namespace': slot.namespace,
+                   'vehicle_file': str(config.vehicle_file) if config.vehicle_file else 'px4-sih-quadx', **logged}))
+    processes: list[NodeProcess] = []
+    px4_processes: list[NodeProcess] = []
+    started = time.monotonic()
+    failed = None
+    if not config.quiet:
+        print(f'starting {sitl.describe()}', flush=True)
+    try:
+        px4_processes = sitl.start()
+        for name, package, executable, module, params in nodes:
+            command = node_command(package, executable, module) + _ros_args(home, params)
+            processes.append(NodeProcess(name, command, env, quiet=config.quiet))
+        bridge = processes[-1]
+        timeout = PX4_OVERHEAD + 2.0 * config.duration
+        dead = wait_for_exit(processes + px4_processes, until=bridge, timeout=timeout)
+        if dead is not None:
+            failed = dead.name
+            if dead.name in ('controller', 'trajectory') and bridge.returncode is None:
+                print(f'[{dead.name}] exited (code {dead.returncode}) in flight: the PX4 bridge hands the vehicle to '
+                      'PX4\'s land mode; waiting for it to land and disarm', flush=True)
+                try:
+                    wait_for_exit([bridge] + px4_processes, until=bridge, timeout=PX4_LANDING_TIMEOUT)
+                except TimeoutError:
+                    pass
+        elif bridge.returncode != 0:
+            failed = bridge.name
+    except (KeyboardInterrupt, TimeoutError) as stop:
+        failed = 'interrupted' if isinstance(stop, KeyboardInterrupt) else f'timeout ({stop})'
+    finally:
+        codes = stop_all(processes)
+        px4_codes = stop_all(px4_processes)
+        sitl.close()
+        if parts.is_dir():
+            install_px4_bag_types()
+            merge_publication_logs(config, parts, home, [''], extra_topics=PX4_RECORDED_TOPICS)
+    wall = time.monotonic() - started
+    for name, code in codes.items():
+        if failed is None and code != 0:
+            failed = name
+    flight_failure = None
+    if processes and failed in (processes[-1].name, 'controller', 'trajectory'):
+        bridge_lines = processes[-1].lines
+        why = next((line.split('-> failsafe: ', 1)[1] for line in bridge_lines if '-> failsafe: ' in line), None)
+        done = any('PX4 disarmed: the flight is over' in line for line in bridge_lines)
+        if why is not None and done:     # the bridge ended the flight by a failsafe and saw PX4 disarm
+            flight_failure = f'PX4 failsafe: {why}' + (f' ({failed} exited in flight)' if failed != 'px4_bridge'
+                                                         else '')
+            if failed == 'px4_bridge':
+                failed = None
+    codes.update({name: code for name, code in px4_codes.items()})
+    return RosFlightResult(wall, failed, codes, sitl.describe(), tuple(processes[-1].lines) if processes else (),
+                           flight_failure)
+
+
 def part_directory(bag: Path) -> Path:
     """Where the nodes of a flight recorded by its publishers put their part bags: beside ``bag``."""
     return bag.with_name(f'{bag.name}.parts')
 
 
-def merge_publication_logs(config: RosFlightConfig, parts: Path, home: str, names: list[str]) -> None:
+def merge_publication_logs(config: RosFlightConfig, parts: Path, home: str, names: list[str],
+                           extra_topics=()) -> None:
     """The flight's bag at ``config.bag`` from the nodes' part bags in ``parts``, which then go. A part a killed
     node left unfinished is merged up to its last complete chunk, and said so."""
     params, _ = load_vehicle_file(config.vehicle_file)
@@ -190,8 +301,8 @@ def merge_publication_logs(config: RosFlightConfig, parts: Path, home: str, name
                                     disturbances=disturbances_label(config.disturbances),
                                     **{DURATION_KEY: repr(float(config.duration)),
                                        MAX_ERROR_KEY: '' if config.max_error is None else repr(config.max_error)})
-    result = merge_parts(parts, config.bag, [known[name] for name in config.topics], namespaces, custom,
-                         overwrite=True)
+    result = merge_parts(parts, config.bag, [known[name] for name in config.topics] + list(extra_topics), namespaces,
+                         custom, overwrite=True)
     for part, reason in result.cut.items():
         print(f'publication log {part} ends early ({reason}): merged up to its last complete chunk', flush=True)
     shutil.rmtree(parts)

@@ -30,6 +30,7 @@ class Launch:
     extra_subscribers: int = 0          #: ROS lockstep: odom subscribers to wait for beyond ours
     record_by: str | None = None        #: ROS backend: who writes the bag (recorder or publishers)
     vehicle_file: Path | None = None    #: the nominal vehicle's file, as given (the ROS nodes read it)
+    px4: object = None                  #: --plant px4-sitl: where PX4 SITL and the Agent are (flight_stack.px4_sitl)
 
 
 def live_sinks(view, speed_factor: float) -> list:
@@ -99,7 +100,8 @@ def fly_here(plan, bag: Path | None, bag_shown: Path | None, progress: bool = Fa
             recording = (FlightBag.create(bag, plan.params, plan.settle_time, topics=plan.topics,
                                           controller=plan.controller, scenario=plan.scenario, backend='embedded',
                                           seed=plan.seed, disturbances=disturbances_label(plan.disturbances.enabled),
-                                          namespace=fleet_layout(1, namespace)[0].namespace, **planned_run(plan))
+                                          namespace=fleet_layout(1, namespace)[0].namespace,
+                                          vehicle_name=plan.vehicle_name, **planned_run(plan))
                          if bag else contextlib.nullcontext())
         with closed_whole(recording) as written:
             result = fly_embedded(plan.controller, plan.trajectory, plan.params, plan.disturbances, plan.gains,
@@ -132,6 +134,7 @@ def fly_fleet_here(launch: 'Launch', plan, bag: Path | None, bag_shown: Path | N
                                          topics=plan.topics, controller=plan.controller, scenario=plan.scenario,
                                          backend='embedded', seed=plan.seed,
                                          disturbances=disturbances_label(plan.disturbances.enabled),
+                                         vehicle_name=plan.vehicle_name,
                                          **planned_run(plan))
                          if bag else contextlib.nullcontext())
         with closed_whole(recording) as written:
@@ -170,7 +173,7 @@ def fly_on_ros(launch: 'Launch', plan, bag: Path, bag_shown: Path | None) -> lis
             topics=[t.name for t in plan.topics], mode=launch.mode, speed_factor=launch.speed_factor,
             extra_odom_subscribers=launch.extra_subscribers, vehicle_file=launch.vehicle_file, gains_file=gains_file,
             settle_time=plan.settle_time, quiet=launch.quiet, record_by=launch.record_by, max_error=plan.max_error,
-            plant=plan.plant))
+            plant=plan.plant, px4=launch.px4))
     if result.failed_node:
         raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
                             + (f'; the bag is closed: {bag}' if bag_shown and bag.exists() else ''),
@@ -188,8 +191,11 @@ def fly_on_ros(launch: 'Launch', plan, bag: Path, bag_shown: Path | None) -> lis
         extra = {'ros': {'namespace': vehicle.namespace, 'mode': launch.mode,
                          'simulator': result.sim_report.split('] ')[-1], 'timing': timing},
                  **({'offset_m': list(vehicle.offset)} if len(vehicles) > 1 else {})}
+        if plan.controller == 'px4':   # PX4's own controller (quad_sim.px4_node: placeholders in the bag)
+            extra['not_measured'] = ('chattering and rotor saturation: PX4 1.15 sends no actuator outputs over '
+                                     'uXRCE-DDS; the bag\'s rotor_forces are hover-force placeholders')
         flights.append((vehicle.namespace, Flown(flight, result.wall_time_s, flight if bag_shown else None,
-                                                 extra)))
+                                                 extra, failure=result.flight_failure)))
     return flights
 
 
@@ -213,7 +219,7 @@ def summarize(flown: Flown, plan, backend: str) -> dict:
                             disturbances=plan.disturbances, gains=plan.gains, physics_rate=plan.physics_rate,
                             wall_time_s=flown.wall_time_s, max_error=plan.max_error, failure=flown.failure,
                             failure_time_s=flown.failure_time_s, planned_duration_s=plan.duration,
-                            plant=plan.plant)
+                            plant=plan.plant, vehicle=plan.vehicle_name)
     summary.update(flown.extra)
     return summary
 

@@ -12,6 +12,8 @@ from quad_sim.px4_offboard import (ARMING_STATE_ARMED, ARMING_STATE_DISARMED, NA
                                    VEHICLE_CMD_NAV_LAND, OffboardConfig, OffboardCore, Phase, Px4Status)
 
 SIH, _ = load_vehicle_file('px4-sih-quadx')
+#: the machine without its settling wait before arming (tested on its own below), so these timings stay PX4's
+NO_SETTLE = OffboardConfig(settle_time=0.0)
 DT = 0.002                      #: [s] the tick (the node runs the core with every message and on a timer)
 NAVIGATION_STATE_POSCTL = 2     #: msg/VehicleStatus.msg; COM_OBL_RC_ACT 0 (default): Position mode
 COM_OF_LOSS_T = 1.0             #: [s] default, commander_params.c
@@ -171,7 +173,7 @@ def test_a_whole_flight_takes_off_lands_and_disarms(level):
 
 
 def test_the_heartbeat_runs_at_20_hz_from_the_first_fresh_odometry():
-    core, fake = OffboardCore(SIH), FakePx4()
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4()
     fly(core, fake, Controller(), until=3.0)
     times = [t for t, _ in fake.modes]
     gaps = [b - a for a, b in zip(times, times[1:])]
@@ -182,13 +184,13 @@ def test_the_heartbeat_runs_at_20_hz_from_the_first_fresh_odometry():
 
 # ---------------------------------------------------------------- refusing to arm
 def test_no_odometry_no_heartbeat_no_arming():
-    core, fake = OffboardCore(SIH), FakePx4(odometry_period=None)
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4(odometry_period=None)
     phases, _ = fly(core, fake, Controller(), until=3.0)
     assert phases == [Phase.WAITING] and fake.received == [] and fake.modes == []
 
 
 def test_nan_odometry_is_refused_once_per_episode_and_never_armed_on():
-    core, fake = OffboardCore(SIH), FakePx4(bad_odometry=lambda t: True)
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4(bad_odometry=lambda t: True)
     phases, events = fly(core, fake, Controller(), until=3.0)
     assert phases == [Phase.WAITING] and commands_of(fake) == [] and not fake.armed
     assert len([e for e in events if e.startswith('odometry rejected: odometry position: non-finite')]) == 1
@@ -196,7 +198,7 @@ def test_nan_odometry_is_refused_once_per_episode_and_never_armed_on():
 
 def test_odometry_that_goes_nan_or_stale_before_arming_stops_the_request():
     """NaN from 1.5 s (inside the request): back to waiting, no arming; good again from 2.5 s: it starts over."""
-    core, fake = OffboardCore(SIH), FakePx4(bad_odometry=lambda t: 0.9 <= t < 2.5)
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4(bad_odometry=lambda t: 0.9 <= t < 2.5)
     phases, events = fly(core, fake, Controller(), until=2.4)
     assert phases == [Phase.WAITING, Phase.STREAMING, Phase.WAITING] and commands_of(fake) == []
     assert any('odometry invalid: not arming' in e for e in events)
@@ -207,14 +209,14 @@ def test_odometry_that_goes_nan_or_stale_before_arming_stops_the_request():
 
 
 def test_stale_odometry_is_not_armed_on():
-    core, fake = OffboardCore(SIH), FakePx4(odometry_period=0.2)     # every sample 0.2 s apart, timeout 0.1 s
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4(odometry_period=0.2)     # every sample 0.2 s apart, timeout 0.1 s
     phases, events = fly(core, fake, Controller(), until=4.0)
     assert not fake.armed and commands_of(fake, VEHICLE_CMD_COMPONENT_ARM_DISARM) == []
     assert Phase.REQUESTING not in phases and any('odometry older than 0.1 s: not arming' in e for e in events)
 
 
 def test_px4_refusing_offboard_ends_in_failsafe_without_arming():
-    core, fake = OffboardCore(SIH), FakePx4()
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4()
     fake.receive = lambda now, output, receive=fake.receive: receive(now, output._replace(commands=()))  # deaf PX4
     phases, events = fly(core, fake, Controller(), until=8.0)
     assert phases[-1] == Phase.DONE and Phase.FAILSAFE in phases and not fake.armed
@@ -223,7 +225,7 @@ def test_px4_refusing_offboard_ends_in_failsafe_without_arming():
 
 # ---------------------------------------------------------------- in flight
 def test_non_finite_forces_are_rejected_and_the_last_valid_ones_hold():
-    core, fake = OffboardCore(SIH), FakePx4()
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4()
     fly(core, fake, Controller(), until=3.0)
     assert core.phase == Phase.FLYING
     output = core.tick(3.06, None, None, (1.0, math.nan, 1.0, 1.0))     # a heartbeat is due: the setpoint goes too
@@ -235,7 +237,7 @@ def test_non_finite_forces_are_rejected_and_the_last_valid_ones_hold():
 def test_a_silent_controller_hands_the_vehicle_to_px4s_land_mode_at_once():
     """The controller stops answering at 3 s: NAV_LAND forces_timeout (0.1 s) later, long before PX4's own offboard
     loss (COM_OF_LOSS_T 1 s) would switch to Position mode; PX4 lands and disarms."""
-    core, fake = OffboardCore(SIH), FakePx4()
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4()
     controller = Controller(silent_from=3.0)
     phases, events = fly(core, fake, controller, until=10.0)
     assert phases[-3:] == [Phase.FLYING, Phase.FAILSAFE, Phase.DONE]
@@ -248,7 +250,7 @@ def test_a_silent_controller_hands_the_vehicle_to_px4s_land_mode_at_once():
 def test_a_stalled_node_meets_px4s_offboard_loss_failsafe():
     """Our node stalls from 3 s to 4.5 s (no heartbeat): PX4 leaves offboard after COM_OF_LOSS_T, for Position mode;
     when the node runs again it sees that and sends nothing more: PX4 is in charge."""
-    core, fake = OffboardCore(SIH), FakePx4()
+    core, fake = OffboardCore(SIH, NO_SETTLE), FakePx4()
     phases, events = fly(core, fake, Controller(), until=6.0, frozen=(3.0, 4.5))
     assert fake.offboard_losses == 1 and fake.nav_state == NAVIGATION_STATE_POSCTL and fake.armed
     assert phases[-2:] == [Phase.FLYING, Phase.FAILSAFE]
@@ -257,7 +259,7 @@ def test_a_stalled_node_meets_px4s_offboard_loss_failsafe():
 
 
 def test_bad_settings_are_refused_with_their_name():
-    with pytest.raises(ParameterError, match="control_level: 'rates' is not one of direct_actuator, thrust_and_torque"):
+    with pytest.raises(ParameterError, match="control_level: 'rates' is not one of direct_actuator, thrust_and_torque, position"):
         OffboardConfig(control_level='rates')
     with pytest.raises(ParameterError, match='heartbeat_period: 0.5 s is not below 0.5 s'):
         OffboardConfig(heartbeat_period=0.5)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -323,3 +324,87 @@ def thrust_torque_setpoints(controls: Sequence[float], params: VehicleParams,
     clip = lambda v: min(max(v, -1.0), 1.0)
     return ((0.0, 0.0, clip(-u1 / scales[3])),
             tuple(clip(t / s) for t, s in zip(torque, scales[:3])))
+
+
+# --- PX4's topics in our bags ---------------------------------------------------------------------------------
+
+from quad_msgs_bridge.contract import QosSpec, TopicSpec   # noqa: E402  (the contract's record type)
+
+#: PX4's client writes /fmu/out best effort + transient local, reads /fmu/in best effort + volatile
+#: (src/modules/uxrce_dds_client/utilities.hpp); keep last 1 as the node's publishers and subscriptions
+_PX4_OUT_QOS = QosSpec('best_effort', 'transient_local', 1)
+_PX4_IN_QOS = QosSpec('best_effort', 'volatile', 1)
+PX4_ODOMETRY = TopicSpec('/fmu/out/vehicle_odometry', 'px4_msgs/msg/VehicleOdometry', _PX4_OUT_QOS,
+                         'PX4 -> px4 bridge: EKF2 odometry, NED/FRD')
+PX4_STATUS = TopicSpec('/fmu/out/vehicle_status', 'px4_msgs/msg/VehicleStatus', _PX4_OUT_QOS,
+                       'PX4 -> px4 bridge: arming and navigation state')
+PX4_OFFBOARD_MODE = TopicSpec('/fmu/in/offboard_control_mode', 'px4_msgs/msg/OffboardControlMode', _PX4_IN_QOS,
+                              'px4 bridge -> PX4: the offboard heartbeat and control level')
+PX4_COMMAND = TopicSpec('/fmu/in/vehicle_command', 'px4_msgs/msg/VehicleCommand', _PX4_IN_QOS,
+                        'px4 bridge -> PX4: mode switch, arming, landing, disarming')
+PX4_MOTORS = TopicSpec('/fmu/in/actuator_motors', 'px4_msgs/msg/ActuatorMotors', _PX4_IN_QOS,
+                       'px4 bridge -> PX4: relative rotor thrusts (direct_actuator)')
+PX4_THRUST = TopicSpec('/fmu/in/vehicle_thrust_setpoint', 'px4_msgs/msg/VehicleThrustSetpoint', _PX4_IN_QOS,
+                       'px4 bridge -> PX4: normalised thrust (thrust_and_torque)')
+PX4_TORQUE = TopicSpec('/fmu/in/vehicle_torque_setpoint', 'px4_msgs/msg/VehicleTorqueSetpoint', _PX4_IN_QOS,
+                       'px4 bridge -> PX4: normalised torque (thrust_and_torque)')
+PX4_TRAJECTORY = TopicSpec('/fmu/in/trajectory_setpoint', 'px4_msgs/msg/TrajectorySetpoint', _PX4_IN_QOS,
+                           'px4 bridge -> PX4: our reference for PX4\'s own controller (--controller px4)')
+#: what a PX4 flight's bag records of PX4's topics, beside the contract's (names for PX4's first instance; the
+#: bridge's ``px4_namespace`` prefixes them)
+PX4_RECORDED_TOPICS = (PX4_ODOMETRY, PX4_STATUS, PX4_OFFBOARD_MODE, PX4_COMMAND, PX4_MOTORS, PX4_THRUST, PX4_TORQUE,
+                       PX4_TRAJECTORY)
+
+
+def px4_msgs_definitions() -> Path:
+    """The folder of px4_msgs' ``.msg`` files as its colcon install has them (``share/px4_msgs/msg``), found on
+    AMENT_PREFIX_PATH, else beside the importable ``px4_msgs`` package (``<prefix>/lib/pythonX.Y/site-packages``).
+    FileNotFoundError saying where it looked."""
+    import os
+    looked = []
+    for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)):
+        folder = Path(prefix) / 'share' / 'px4_msgs' / 'msg'
+        looked.append(str(folder))
+        if (folder / 'VehicleOdometry.msg').is_file():
+            return folder
+    import importlib.util
+    spec = importlib.util.find_spec('px4_msgs')
+    if spec is not None and spec.submodule_search_locations:
+        package = Path(next(iter(spec.submodule_search_locations)))
+        folder = package.parents[3] / 'share' / 'px4_msgs' / 'msg'
+        looked.append(str(folder))
+        if (folder / 'VehicleOdometry.msg').is_file():
+            return folder
+    raise FileNotFoundError('px4_msgs message definitions (share/px4_msgs/msg/*.msg) not found; looked in '
+                            + (', '.join(looked) or 'nothing: AMENT_PREFIX_PATH is empty and px4_msgs is not '
+                               'importable'))
+
+
+def px4_types(names: Sequence[str] | None = None, folder: Path | None = None) -> dict:
+    """rosbags type definitions of the px4_msgs types ``names`` ('px4_msgs/msg/X'; None: those of
+    PX4_RECORDED_TOPICS), parsed from the px4_msgs install's ``.msg`` files (:func:`px4_msgs_definitions`). Nothing
+    of px4_msgs is copied into this stack: a bag gets its schemas from the px4_msgs the flight ran with."""
+    from rosbags.typesys import get_types_from_msg
+    folder = px4_msgs_definitions() if folder is None else Path(folder)
+    types: dict = {}
+    for name in names or sorted({spec.type for spec in PX4_RECORDED_TOPICS}):
+        types.update(get_types_from_msg((folder / f'{name.rsplit("/", 1)[-1]}.msg').read_text(), name))
+    return types
+
+
+def install_px4_bag_types(names: Sequence[str] | None = None, folder: Path | None = None) -> None:
+    """Teach this process's bag writers px4_msgs: the types are added to rosbags' ROS 2 Jazzy store module, so
+    every typestore made from it (quad_msgs_bridge.bag.writer.jazzy_typestore: the publication logs, the merge,
+    the recorder) writes their schemas (``ros2msg``, the px4_msgs ``.msg`` text) and RIHS01 hashes. Idempotent.
+    FileNotFoundError when px4_msgs is not installed (:func:`px4_msgs_definitions`)."""
+    import importlib
+    from rosbags.typesys.store import Typestore
+    store = importlib.import_module('rosbags.typesys.stores.ros2_jazzy')
+    wanted = [n for n in (names or sorted({spec.type for spec in PX4_RECORDED_TOPICS})) if n not in store.FIELDDEFS]
+    if not wanted:
+        return
+    scratch = Typestore(store)
+    scratch.register(px4_types(wanted, folder))
+    for name in scratch.fielddefs.keys() - store.FIELDDEFS.keys():
+        store.FIELDDEFS[name] = scratch.fielddefs[name]
+        setattr(store, name.replace('/', '__'), scratch.types[name])

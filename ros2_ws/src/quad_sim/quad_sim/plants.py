@@ -16,9 +16,14 @@ PLANT_DESCRIPTIONS = {
     'rotorpy': 'RotorPy\'s Multirotor with its aerodynamics and motor model (docs/ROTORPY.md)',
     'rotorpy-bare': 'RotorPy\'s rigid body and rotors alone (aero off, instant motors), to compare with ours',
     'rotorpy-batched': 'RotorPy\'s BatchedMultirotor (torch): a campaign batch per step',
+    'px4-sitl': 'PX4 SITL\'s own SIH quadrotor over uXRCE-DDS, real time; run_stack.py\'s ROS backend only (docs/PX4.md)',
 }
 PLANTS = tuple(PLANT_DESCRIPTIONS)
 DEFAULT_PLANT = 'quad_sim'
+#: not a simulator of ours: PX4 SITL flies it, started with the Agent by flight_stack.px4_sitl (ROS backend only)
+PX4_SITL = 'px4-sitl'
+#: the controller kind that is PX4's own cascaded controller (run_stack.py --controller px4): flown on PX4_SITL only
+PX4_CONTROLLER = 'px4'
 
 
 def check_plant(name: str, argument: str = 'plant') -> str:
@@ -52,7 +57,10 @@ def make_plant(name: str, params: VehicleParams, disturbances: Disturbances):
     defaults); ``rotorpy-bare``: with both off; ``rotorpy-batched``: the same model as ``rotorpy`` stepped as one
     batch by RotorPy's torch twin (:class:`~quad_sim.rotorpy_batched_plant.BatchedRotorPyPlant`). ParameterError
     if RotorPy (or torch, for the batched one) is not installed or cannot represent the vehicle."""
-    if check_plant(name) == 'quad_sim':
+    if check_plant(name) == PX4_SITL:
+        raise ParameterError(f'plant {PX4_SITL}: PX4 SITL flies it, not a simulator here; fly it with run_stack.py '
+                             f'--plant {PX4_SITL} (ROS backend, docs/PX4.md)')
+    if name == 'quad_sim':
         return QuadrotorModel(params, disturbances)
     if name == 'rotorpy-batched':
         from .rotorpy_batched_plant import BatchedRotorPyPlant

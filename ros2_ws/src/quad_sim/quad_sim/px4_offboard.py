@@ -59,7 +59,10 @@ from quad_msgs_bridge.state import OdometrySample, odometry_from_state
 from quad_msgs_bridge.validation import ParameterError, check_number
 from quad_msgs_bridge.vehicle_params import VehicleParams
 
-CONTROL_LEVELS = ('direct_actuator', 'thrust_and_torque')
+#: what the flight sends PX4: our rotor forces as ActuatorMotors, or as normalised thrust and torque; or
+#: ``position``: our reference as TrajectorySetpoint (position, velocity, acceleration feed-forward, yaw), flown by
+#: PX4's own cascaded position/velocity/attitude/rate controller (run_stack.py --controller px4)
+CONTROL_LEVELS = ('direct_actuator', 'thrust_and_torque', 'position')
 
 # msg/VehicleCommand.msg and msg/VehicleStatus.msg
 VEHICLE_CMD_NAV_LAND = 21
@@ -89,6 +92,8 @@ class Px4Status(NamedTuple):
 
     arming_state: int     #: ARMING_STATE_DISARMED or ARMING_STATE_ARMED
     nav_state: int        #: NAVIGATION_STATE_OFFBOARD, NAVIGATION_STATE_AUTO_LAND, ...
+    #: PX4's arming checks pass (EKF2 converged, GPS, sensors): a freshly started SITL needs ~10-20 s for them
+    pre_flight_checks_pass: bool = True
 
 
 class OffboardMode(NamedTuple):
@@ -126,6 +131,7 @@ class Setpoint(NamedTuple):
     motors: tuple | None = None
     thrust: tuple | None = None
     torque: tuple | None = None
+    trajectory: px4.Px4TrajectorySetpoint | None = None   #: the ``position`` level's TrajectorySetpoint
 
 
 class Output(NamedTuple):
@@ -158,6 +164,26 @@ class OffboardConfig:
     target_component: int = 1
     source_system: int = 1
     source_component: int = 1
+    #: [m, world ENU] where our frame puts the vehicle at flight time 0 (the scenario's start): our ``odom`` is
+    #: PX4's position less its position at arming plus this (PX4's EKF origin is not our scenario's; its height
+    #: estimate on the ground also drifts by metres before take-off), and a ``position`` reference goes back the
+    #: same way
+    initial_position: tuple = (0.0, 0.0, 0.0)
+    #: [rad, ENU] our frame's heading of the vehicle at flight time 0 (the scenario's start): our world is PX4's
+    #: turned about the vertical so that the vehicle's heading at arming becomes this one (PX4's SIH vehicle starts
+    #: facing north, psi = pi/2, where our scenarios start at their reference's yaw; a rigid turn of the world,
+    #: which SIH's physics without wind does not notice)
+    initial_yaw: float = 0.0
+    #: before asking to arm, PX4's odometry must have been still (speed below ``still_speed``, position within
+    #: ``still_distance`` of where the window began) this long after its pre-flight checks passed: PX4 SITL's EKF2
+    #: dead-reckons before it fuses GPS (its estimate wandered tens of metres at up to 3 m/s on the ground here) and
+    #: resets when it does (a 1.5 m/s velocity error at arming here); a controller armed on that chases an estimate
+    #: running away
+    settle_time: float = 2.0
+    #: [m/s] (SIH's EKF2 estimate of the vehicle on the ground here: speeds of 0.2-0.6 m/s and +-0.5 m of position
+    #: noise even once settled; the gate keeps out only the runaway before and at its GPS reset)
+    still_speed: float = 0.6
+    still_distance: float = 0.8            #: [m]
 
     def __post_init__(self):
         if self.control_level not in CONTROL_LEVELS:
@@ -165,8 +191,11 @@ class OffboardConfig:
         for name in ('odom_timeout', 'heartbeat_period', 'command_retry', 'request_timeout', 'first_forces_timeout',
                      'forces_timeout', 'landed_height', 'landed_speed'):
             check_number(name, getattr(self, name), 0.0, math.inf, low_inclusive=False)
-        for name in ('prearm_stream', 'landed_hold'):
+        for name in ('prearm_stream', 'landed_hold', 'settle_time', 'still_speed', 'still_distance'):
             check_number(name, getattr(self, name), 0.0)
+        check_number('initial_yaw', self.initial_yaw)
+        if len(self.initial_position) != 3 or not all(math.isfinite(v) for v in self.initial_position):
+            raise ParameterError(f'initial_position: {self.initial_position} is not 3 finite values [m]')
         if self.heartbeat_period >= 0.5:
             raise ParameterError(f'heartbeat_period: {self.heartbeat_period} s is not below 0.5 s (PX4 needs > 2 Hz)')
 
@@ -191,6 +220,9 @@ class OffboardCore:
         self.flight_origin_us: int | None = None     #: [us] PX4 sample time of flight time 0
         self.publish_origin = False                  #: that sample is our first odom, sent when the flight starts
         self.ground_z: float | None = None           #: [m, ENU] height at flight time 0
+        #: [m, ENU] PX4's position at flight time 0 (until then: the latest), our frame's initial_position
+        self.origin: tuple | None = None
+        self.turn = 0.0                              #: [rad] our world's heading less PX4's (ENU)
         self.still_since: float | None = None
         self.forces: tuple | None = None             #: the latest valid rotor forces [N]
         self.forces_arrival = -math.inf
@@ -198,6 +230,10 @@ class OffboardCore:
         self.last_heartbeat = -math.inf
         self.last_command: dict[int, float] = {}     #: command -> when last sent
         self.failsafe_command: int | None = None
+        self.waiting_for_checks = False
+        self.waiting_for_still = False
+        self.still_from: tuple | None = None          #: (since when, where) the odometry has been still
+        self.failed: str | None = None               #: why the flight ended in a failsafe, if it did
 
     # --- inputs ---------------------------------------------------------------------------------------------
     def request_landing(self) -> None:
@@ -220,10 +256,13 @@ class OffboardCore:
         return True
 
     def _take_forces(self, now: float, forces: Sequence[float], events: list) -> bool:
+        """Take rotor forces [N] (4), or at the ``position`` level a reference (11: position [m], velocity [m/s],
+        acceleration [m/s^2], world ENU in our frame, yaw [rad], yaw rate [rad/s])."""
         values = tuple(float(f) for f in forces)
-        if len(values) != 4 or not all(math.isfinite(f) for f in values):
+        size, what = (11, 'reference') if self.config.control_level == 'position' else (4, 'rotor forces')
+        if len(values) != size or not all(math.isfinite(f) for f in values):
             if not self.forces_rejected:
-                events.append(f'rotor forces rejected (4 finite values needed): {values}')
+                events.append(f'{what} rejected ({size} finite values needed): {values}')
             self.forces_rejected = True
             return False
         self.forces_rejected = False
@@ -238,11 +277,16 @@ class OffboardCore:
     def _mode(self, now: float) -> OffboardMode:
         """The heartbeat, naming the control level from the first one (PX4's offboard check wants some flag set)."""
         level = self.config.control_level
+        if level == 'position':
+            return OffboardMode(_us(now), position=True, velocity=True, acceleration=True)
         return OffboardMode(_us(now), thrust_and_torque=level == 'thrust_and_torque',
                             direct_actuator=level == 'direct_actuator')
 
     def _setpoint(self, now: float, forces: tuple | None) -> Setpoint:
-        """The level's setpoint of rotor forces [N] (None: idle, zero thrust)."""
+        """The level's setpoint of rotor forces [N] (None: idle, zero thrust); at the ``position`` level of the
+        reference (None: hold where the vehicle is, at its heading)."""
+        if self.config.control_level == 'position':
+            return Setpoint(_us(now), trajectory=self._trajectory(forces))
         if self.config.control_level == 'direct_actuator':
             return Setpoint(_us(now), motors=px4.motor_controls(forces or (0.0,) * 4, self.params, self.order))
         if forces is None:
@@ -250,6 +294,27 @@ class OffboardCore:
         thrust, torque = px4.thrust_torque_setpoints(controls_from_forces(*forces, self.params.mixer), self.params,
                                                      self.scales)
         return Setpoint(_us(now), thrust=thrust, torque=torque)
+
+    def _trajectory(self, reference: tuple | None) -> px4.Px4TrajectorySetpoint:
+        """PX4's TrajectorySetpoint of a reference in our frame (None: hold the latest odometry's position and
+        heading, at rest)."""
+        state = self.state
+        if reference is None:
+            return px4.trajectory_setpoint(state[0:3], (0.0,) * 3, (0.0,) * 3, state[8], 0.0)
+        relative = [r - i for r, i in zip(reference[0:3], self.config.initial_position)]
+        position = [p + o for p, o in zip(_turned(relative, -self.turn), self.origin)]
+        return px4.trajectory_setpoint(position, _turned(reference[3:6], -self.turn),
+                                       _turned(reference[6:9], -self.turn), reference[9] - self.turn, reference[10])
+
+    def our_state(self) -> list[float]:
+        """The latest odometry in our frame: PX4's world (ENU) moved so that the vehicle's position and heading at
+        flight time 0 become ``initial_position`` and ``initial_yaw``: position Rz(turn) (p - origin) +
+        initial_position, velocity Rz(turn) v, psi + turn; roll, pitch and the Euler-angle rates as they are."""
+        origin = self.origin if self.origin is not None else self.state[0:3]
+        relative = _turned([p - o for p, o in zip(self.state[0:3], origin)], self.turn)
+        psi = math.atan2(math.sin(self.state[8] + self.turn), math.cos(self.state[8] + self.turn))
+        return [*(r + i for r, i in zip(relative, self.config.initial_position)), *_turned(self.state[3:6], self.turn),
+                self.state[6], self.state[7], psi, *self.state[9:12]]
 
     def _command(self, now: float, command: int, param1: float = 0.0, param2: float = 0.0) -> VehicleCommand | None:
         """The command if it is due (never sent, or ``command_retry`` s ago), else None."""
@@ -267,6 +332,7 @@ class OffboardCore:
 
     def _fail(self, now: float, events: list, why: str, command: int | None) -> None:
         self.failsafe_command = command
+        self.failed = why
         self._enter(now, Phase.FAILSAFE, events, why)
 
     # --- the machine ----------------------------------------------------------------------------------------
@@ -294,7 +360,7 @@ class OffboardCore:
                 setpoint = self._setpoint(now, None)
         our_odometry = None
         if self.flight_origin_us is not None and (new_odometry or self.publish_origin):
-            our_odometry = odometry_from_state((self.odometry_us - self.flight_origin_us) * 1e-6, self.state)
+            our_odometry = odometry_from_state((self.odometry_us - self.flight_origin_us) * 1e-6, self.our_state())
             self.publish_origin = False
         return Output(self.phase, mode, setpoint, tuple(c for c in commands if c is not None), our_odometry,
                       tuple(events))
@@ -332,9 +398,35 @@ class OffboardCore:
         if not self._pre_flight_checks(now, events):
             return False
         if now - self.since >= self.config.prearm_stream:
+            if self.status is None or not self.status.pre_flight_checks_pass:
+                if not self.waiting_for_checks:
+                    events.append('waiting for PX4\'s pre-flight checks to pass (VehicleStatus.pre_flight_checks_pass)')
+                self.waiting_for_checks = True
+                self.still_from = None
+                return True
+            if not self._settled(now, events):
+                return True
             self._enter(now, Phase.REQUESTING, events, f'{self.config.prearm_stream} s of heartbeats')
             return self._requesting(now, events, commands, new_forces)
         return True
+
+    def _settled(self, now: float, events: list) -> bool:
+        """True once the odometry has been still for ``settle_time`` s (config), the window restarting on a move."""
+        c = self.config
+        speed = math.sqrt(sum(v * v for v in self.state[3:6]))
+        if self.still_from is not None:
+            moved = math.dist(self.state[0:3], self.still_from[1])
+            if speed > c.still_speed or moved > c.still_distance:
+                self.still_from = None
+        if self.still_from is None:
+            if speed > c.still_speed:
+                if not self.waiting_for_still:
+                    events.append(f'waiting for PX4\'s odometry to be still before arming (speed {speed:.2f} m/s on '
+                                  'the ground: EKF2 still settling)')
+                self.waiting_for_still = True
+                return False
+            self.still_from = (now, tuple(self.state[0:3]))
+        return now - self.still_from[0] >= c.settle_time
 
     def _requesting(self, now, events, commands, new_forces) -> bool:
         if not self._pre_flight_checks(now, events):
@@ -351,6 +443,8 @@ class OffboardCore:
         else:
             self._enter(now, Phase.FLYING, events, 'PX4 is in offboard and armed: our controller flies')
             self.flight_origin_us, self.ground_z, self.publish_origin = self.odometry_us, self.state[2], True
+            self.origin = tuple(self.state[0:3])
+            self.turn = self.config.initial_yaw - self.state[8]
             self.forces = None        # forces from before the flight are not flown
         return True
 
@@ -411,6 +505,12 @@ class OffboardCore:
 
     def _done(self, now, events, commands, new_forces) -> bool:
         return False
+
+
+def _turned(vector, angle: float) -> list[float]:
+    """A world vector [x, y, z] turned by ``angle`` [rad] about z (counter-clockwise seen from above)."""
+    c, s = math.cos(angle), math.sin(angle)
+    return [c * vector[0] - s * vector[1], s * vector[0] + c * vector[1], vector[2]]
 
 
 def _us(seconds: float) -> int:
