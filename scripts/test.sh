@@ -6,6 +6,11 @@
 #   which any machine can build: so the ROS half is tested without /opt/ros too. SKIP_ROS_WHEELS=1 leaves it out;
 # - the tests of the plant rotorpy-batched (-m rotorpy_batched) once more in .venv-rotorpy-batched, which adds torch
 #   (requirements-rotorpy-batched.txt) to the test requirements. SKIP_ROTORPY_BATCHED=1 leaves it out.
+# - the PX4 SITL lane (-m px4, docs/PX4.md): flights on PX4 SITL's SIH quadrotor over uXRCE-DDS, where PX4 SITL
+#   (PX4_DIR: the PX4-Autopilot folder with build/px4_sitl_default), the Micro XRCE-DDS Agent (MicroXRCEAgent on
+#   PATH) and px4_msgs (importable by the lane's interpreter: PX4_PYTHON, default .venv-ros-wheels/bin/python, with
+#   its colcon install sourced) are found; elsewhere it prints what is missing and skips, in a second. SKIP_PX4=1
+#   leaves it out.
 # The four environments are set up at the same time; each run spreads its tests over one pytest-xdist worker per
 # CPU (TEST_WORKERS=N sets another count; the tests sharing a module-scoped flight stay on one worker: conftest.py).
 # --quick (first argument): the lane to run before every commit: .venv only, without the tests marked slow or ros.
@@ -78,6 +83,32 @@ done
 if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels, ROS tests only (-m ros): $(bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python tests/ros_support.py)"
   run_suite ros bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python
+fi
+if [ "${SKIP_PX4:-0}" != 1 ]; then
+  px4_python=${PX4_PYTHON:-.venv-ros-wheels/bin/python}
+  px4_missing=''
+  if [ ! -x "$px4_python" ]; then
+    px4_missing="no interpreter $px4_python (set PX4_PYTHON, or let this script build .venv-ros-wheels)"
+  else
+    px4_missing=$("$px4_python" - <<'PY' 2>&1 || true
+import sys
+sys.path[:0] = ['.', 'ros2_ws/src/quad_msgs_bridge', 'ros2_ws/src/quad_sim', 'ros2_ws/src/nnit2fsmc_controller']
+from flight_stack.px4_sitl import find_px4
+from quad_msgs_bridge.validation import ParameterError
+try:
+    import rclpy  # noqa: F401
+    find_px4()
+except (ImportError, ParameterError) as error:
+    print(error)
+PY
+)
+  fi
+  if [ -n "$px4_missing" ]; then
+    echo "== PX4 SITL lane skipped: $px4_missing"
+  else
+    echo "== PX4 SITL lane (-m px4): PX4_DIR=$PX4_DIR, $(command -v MicroXRCEAgent || true), $px4_python"
+    run_pytest "$px4_python" -m pytest "${others[@]}" -m "${user_marks:+$user_marks and }px4"
+  fi
 fi
 if [ "$skip_batched" != 1 ]; then
   echo "== .venv-rotorpy-batched, the plant rotorpy-batched's tests (-m rotorpy_batched): torch $(.venv-rotorpy-batched/bin/python -c 'import torch; print(torch.__version__)')"
