@@ -329,7 +329,7 @@ def test_our_controller_killed_in_flight_hands_the_vehicle_to_px4s_land_mode(tmp
     for line in process.stdout:
         lines.append(line)
         if killed is None and 'our controller flies' in line:
-            time.sleep(0.5)
+            time.sleep(2.5)       # past its publication log's first complete chunks (a killed node keeps those)
             killed = _controller_pid(process.pid)
             os.kill(killed, signal.SIGKILL)
         assert time.monotonic() < deadline, ''.join(lines)
@@ -343,7 +343,7 @@ def test_our_controller_killed_in_flight_hands_the_vehicle_to_px4s_land_mode(tmp
     counts = _read_with_mcap(Path(bags[0]))
     assert counts['/fmu/in/vehicle_command'] >= 3         # offboard, arm, land
     flight = read_flight(bags[0], vehicle_file='px4-sih-quadx')
-    assert flight.time[-1] > 0.3
+    assert flight.time[-1] > 0.5
 
 
 def _controller_pid(parent: int) -> int:
