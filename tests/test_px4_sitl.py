@@ -359,3 +359,23 @@ def _controller_pid(parent: int) -> int:
         if int(stat.rsplit(')', 1)[1].split()[1]) == parent and 'controller_node' in command:
             return int(entry.name)
     raise AssertionError(f'no controller node under process {parent}')
+
+
+def test_a_vehicle_that_never_left_the_ground_is_disarmed_in_the_failsafe():
+    """The controller never answers: NAV_LAND 1 s after arming; PX4's land mode would keep the vehicle on the
+    ground armed (seen on SIH: until COM_DISARM_PRFLT), so once it is still the bridge disarms it."""
+    from quad_sim.px4_offboard import (ARMING_STATE_ARMED, NAVIGATION_STATE_AUTO_LAND, VEHICLE_CMD_COMPONENT_ARM_DISARM,
+                                       VEHICLE_CMD_NAV_LAND, Phase, Px4Status)
+    core, _, t, stamp = _flying_core('direct_actuator', (0.0, 0.0, 0.0), 0.0, (0.0, 0.0, 0.0), 0.0)
+    sent = []
+    status = Px4Status(ARMING_STATE_ARMED, 14, True)
+    while t < 5.0:
+        output = core.tick(t, px4.px4_odometry_from_state(stamp, [0.0] * 12), status)
+        sent += [(t, c.command, c.param1) for c in output.commands]
+        if any(c.command == VEHICLE_CMD_NAV_LAND for c in output.commands):
+            status = Px4Status(ARMING_STATE_ARMED, NAVIGATION_STATE_AUTO_LAND, True)
+        t, stamp = t + 0.01, stamp + 10_000
+    assert core.phase == Phase.FAILSAFE and 'no rotor forces within 1.0 s' in core.failed
+    [land] = [s for s in sent if s[1] == VEHICLE_CMD_NAV_LAND]
+    disarms = [s for s in sent if s[1] == VEHICLE_CMD_COMPONENT_ARM_DISARM and s[2] == 0.0]
+    assert disarms and disarms[0][0] - land[0] == pytest.approx(1.0, abs=0.05)   # landed_hold after the NAV_LAND

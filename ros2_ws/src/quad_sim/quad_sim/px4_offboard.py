@@ -499,6 +499,11 @@ class OffboardCore:
             self._enter(now, Phase.DONE, events, 'disarmed')
         elif self.failsafe_command == VEHICLE_CMD_NAV_LAND and status.nav_state != NAVIGATION_STATE_AUTO_LAND:
             commands.append(self._command(now, VEHICLE_CMD_NAV_LAND))
+        elif (self.failsafe_command == VEHICLE_CMD_NAV_LAND and self.ground_z is not None
+              and self.odometry_fresh(now) and self._landed(now)):
+            # PX4's land mode keeps a vehicle that never left the ground armed (its land detector wants a descent;
+            # seen here: 30 s, until COM_DISARM_PRFLT): on the ground and still, disarm as after a landing
+            commands.append(self._command(now, VEHICLE_CMD_COMPONENT_ARM_DISARM, 0.0))
         elif self.failsafe_command == VEHICLE_CMD_COMPONENT_ARM_DISARM:
             commands.append(self._command(now, VEHICLE_CMD_COMPONENT_ARM_DISARM, 0.0))
         return False
