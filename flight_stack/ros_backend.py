@@ -112,6 +112,8 @@ def _ros_args(namespace: str, params: dict) -> list[str]:
 
 #: [s, wall] after a dead controller, for the PX4 bridge to land and disarm the vehicle before it is stopped
 PX4_LANDING_TIMEOUT = 60.0
+#: [s] the bridge's odometry timeout when PX4's own controller flies (ours: the node's default, 0.1 s)
+PX4_OWN_ODOM_TIMEOUT = 0.5
 #: [s, wall] for PX4 SITL to start and pass its pre-flight checks, and to land after the flight
 PX4_OVERHEAD = 120.0
 
@@ -227,6 +229,9 @@ def fly_px4(config: RosFlightConfig) -> RosFlightResult:
                        **({'gains_file': str(config.gains_file)} if config.gains_file else {})}))
     nodes.append(('px4_bridge', 'quad_sim', 'px4_bridge', 'quad_sim.px4_node',
                   {'control_level': 'position' if own else 'direct_actuator', 'duration': config.duration,
+                   # PX4's own controller flies on its own estimate: a gap in the odometry we see is no reason to
+                   # take the vehicle from it (a 0.1 s gap ended one such flight on this loaded machine)
+                   **({'odom_timeout': PX4_OWN_ODOM_TIMEOUT} if own else {}),
                    'exit_at_end': True, 'initial_position': [float(v) for v in trajectory.initial_state[0:3]],
                    'initial_yaw': float(trajectory.initial_state[8]),
                    'target_system': slot.target_system, 'px4_namespace': slot.namespace,
