@@ -21,14 +21,13 @@ from quad_msgs_bridge.yaml_files import load_yaml
 
 
 from .axis_laws import NNIT2FSMCLaw
-from .controller import ATTITUDE_RATES, AXES, CascadedController
+from .controller import ATTITUDE_RATES, AXES
 from .estimation import MeasurementStage
 from .gain_units import check_hover_authority, in_vehicle_units
 from .it2_fuzzy import TYPE_REDUCERS, IT2FuzzyCorrector, SaturationCorrector
 from .kinds import ABLATIONS as _ABLATIONS, BUILT_IN
 from .neural_network import MODIFICATIONS, EquivalentControlNetwork
-from .registry import ControllerKind, controller_kind, kind_for_section, section_gains
-from .se3 import SE3Controller
+from .registry import controller_kind, kind_for_section, section_gains
 
 DEFAULT_CONTROLLER_FILE = Path(__file__).resolve().parent / 'config' / 'controller.yaml'
 #: the named gains sets (``--gains NAME``; docs/SCOREBOARD.md): 'untuned' (the packaged gains before issue 26's
