@@ -18,7 +18,7 @@ import difflib
 import functools
 import importlib
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import metadata
 from typing import Any, Callable, Mapping
 
@@ -109,7 +109,7 @@ def _contract_kind(name: str, cls: type, source: str) -> ControllerKind:
         from .factory import control_period
         return ContractController(kind_name, cls, params, section_gains(kind, gains), control_period(gains), batch)
 
-    kind = ControllerKind(name, description or name, build, section, schema,
+    kind = ControllerKind(name, description or name, build, section, schema,   # build reads it when it is called
                           _dimensions(section, schema, getattr(cls, 'search', None)),
                           batched=bool(getattr(cls, 'batched', False)), source=source)
     return kind
@@ -126,7 +126,6 @@ def kind_of(name: str, value: Any, source: str) -> ControllerKind:
 
 
 def _renamed(kind: ControllerKind, name: str, source: str) -> ControllerKind:
-    from dataclasses import replace
     return replace(kind, name=name, source=source)
 
 
