@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Set up the test environments and run the tests:
-# - the whole suite twice: with the pinned (newest) numpy and with numpy 1.26.4, the version ROS 2 Jazzy users
-#   have on Ubuntu 24.04; where a ROS 2 Jazzy is sourced, its ROS tests run there against it;
+# - the whole suite with the pinned (newest) numpy, then every test not marked slow once more with numpy 1.26.4, the
+#   version ROS 2 Jazzy users have on Ubuntu 24.04 (the slow tests, long flights, campaigns and package builds, drive
+#   the same modules as the others for longer, and run once); where a ROS 2 Jazzy is sourced, its ROS tests run
+#   there against it;
 # - the ROS-marked tests once more in .venv-ros-wheels, on the PyPI ROS 2 wheels (requirements-ros-wheels.txt),
 #   which any machine can build: so the ROS half is tested without /opt/ros too. SKIP_ROS_WHEELS=1 leaves it out;
 # - the tests of the plant rotorpy-batched (-m rotorpy_batched) once more in .venv-rotorpy-batched, which adds torch
@@ -11,7 +13,8 @@
 #   PATH) and px4_msgs (importable by the lane's interpreter: PX4_PYTHON, default .venv-ros-wheels/bin/python, with
 #   its colcon install sourced) are found; elsewhere it prints what is missing and skips, in a second. SKIP_PX4=1
 #   leaves it out.
-# The four environments are set up at the same time; each run spreads its tests over one pytest-xdist worker per
+# The four environments are set up at the same time, and the first run starts as soon as .venv is ready (the tests
+# needing the CPUs to themselves wait for every set-up to end); each run spreads its tests over one pytest-xdist worker per
 # CPU (TEST_WORKERS=N sets another count; the tests sharing a module-scoped flight stay on one worker: conftest.py).
 # --quick (first argument): the lane to run before every commit: .venv only, without the tests marked slow or ros.
 # Each run says which ROS 2 it used. Extra arguments go to pytest; pytest's "no tests collected" (exit code 5,
@@ -27,7 +30,7 @@ workers=${TEST_WORKERS:-$(nproc 2>/dev/null || echo 2)}
 parallel=(-n "$workers" --dist loadgroup)
 
 setups=()
-bash scripts/setup_venv.sh .venv requirements-test.txt & setups+=($!)
+bash scripts/setup_venv.sh .venv requirements-test.txt & venv_setup=$!
 if [ $quick = 0 ]; then
   { bash scripts/setup_venv.sh .venv-numpy126 requirements-test.txt &&
     { [ "$(.venv-numpy126/bin/python -c 'import numpy; print(numpy.__version__)')" = 1.26.4 ] ||
@@ -41,7 +44,8 @@ fi
 if [ "$skip_batched" != 1 ]; then
   bash scripts/setup_venv.sh .venv-rotorpy-batched requirements-rotorpy-batched.txt & setups+=($!)
 fi
-for setup in "${setups[@]}"; do wait "$setup"; done
+wait "$venv_setup"
+wait_for_setups() { for setup in "${setups[@]}"; do wait "$setup"; done; setups=(); }
 
 status=0
 run_pytest() {
@@ -68,6 +72,7 @@ run_suite() {   # run_suite MARKS PYTHON...: the tests of MARKS spread over the 
   local selected=$1; shift
   if [ -n "$user_marks" ]; then selected="${selected:+$selected and }$user_marks"; fi
   run_pytest "$@" -m pytest "${parallel[@]}" "${others[@]}" -m "${selected:+$selected and }not exclusive"
+  wait_for_setups
   run_pytest "$@" -m pytest "${others[@]}" -m "${selected:+$selected and }exclusive"
 }
 
@@ -76,10 +81,10 @@ if [ $quick = 1 ]; then
   run_pytest .venv/bin/python -m pytest "${parallel[@]}" "${others[@]}" -m "${user_marks:+$user_marks and }not slow and not ros"
   exit $status
 fi
-for venv in .venv .venv-numpy126; do
-  echo "== $venv: numpy $("$venv/bin/python" -c 'import numpy; print(numpy.__version__)'); $("$venv/bin/python" tests/ros_support.py)"
-  run_suite '' "$venv/bin/python"
-done
+echo "== .venv, every test: numpy $(.venv/bin/python -c 'import numpy; print(numpy.__version__)'); $(.venv/bin/python tests/ros_support.py)"
+run_suite '' .venv/bin/python
+echo "== .venv-numpy126, the tests not marked slow (-m 'not slow'): numpy $(.venv-numpy126/bin/python -c 'import numpy; print(numpy.__version__)'); $(.venv-numpy126/bin/python tests/ros_support.py)"
+run_suite 'not slow' .venv-numpy126/bin/python
 if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels, ROS tests only (-m ros): $(bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python tests/ros_support.py)"
   run_suite ros bash scripts/without_sourced_ros.sh .venv-ros-wheels/bin/python
