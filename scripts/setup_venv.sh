@@ -37,6 +37,8 @@ fi
 stamp="$venv/.installed-$(basename "$requirements").sha256"
 hash=$(cat "$(dirname "$requirements")"/requirements*.txt "$requirements" | sha256sum | cut -d' ' -f1)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$hash" ]; then
-  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$requirements"
+  # --no-compile: Python compiles what is imported when it is first imported; byte-compiling every installed file
+  # (torch's thousands) cost more CPU than the set-up's downloads and unpacking together
+  "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-compile -r "$requirements"
   echo "$hash" > "$stamp"
 fi

@@ -34,7 +34,7 @@ bash scripts/setup_venv.sh .venv requirements-test.txt & venv_setup=$!
 if [ $quick = 0 ]; then
   { bash scripts/setup_venv.sh .venv-numpy126 requirements-test.txt &&
     { [ "$(.venv-numpy126/bin/python -c 'import numpy; print(numpy.__version__)')" = 1.26.4 ] ||
-      .venv-numpy126/bin/python -m pip install --quiet --disable-pip-version-check numpy==1.26.4; }; } & setups+=($!)
+      .venv-numpy126/bin/python -m pip install --quiet --disable-pip-version-check --no-compile numpy==1.26.4; }; } & setups+=($!)
 fi
 if [ "$skip_wheels" != 1 ]; then
   echo "== .venv-ros-wheels: installing the pinned PyPI ROS 2 wheels (requirements-ros-wheels.txt)"
