@@ -164,13 +164,17 @@ def test_indi_rejects_a_vertical_force_step_through_the_measurement_stage_as_its
     np.testing.assert_allclose(left, expected, atol=0.01)
 
 
-def roll_pitch_command_spread(kind: str, velocity_noise: float, duration: float = 3.0) -> float:
+def roll_pitch_command_spread(kind: str, velocity_noise: float, duration: float = 3.0,
+                              attitude_rates: str | None = None) -> float:
     """The standard deviation of U2 and U3 [N] (the larger) over the last second of ``duration`` [s] of hover at
     1 m (from the ground) by ``kind`` on the nominal vehicle, its measured velocity carrying white noise of
     ``velocity_noise`` [m/s] (seeded), read through the measurement stage; the untuned gains (matched at the same
-    small-signal slope: the laws compared, not two tunings)."""
+    small-signal slope: the laws compared, not two tunings), with their ``common.attitude_rates`` or the one given."""
     trajectory = make_scenario('hover', duration)
-    controller = build_controller(kind, VEHICLE, load_gains('untuned'))
+    gains = load_gains('untuned')
+    if attitude_rates is not None:
+        gains['common']['attitude_rates'] = attitude_rates
+    controller = build_controller(kind, VEHICLE, gains)
     simulator = Simulator(QuadrotorModel(VEHICLE, DISTURBANCES), DT, trajectory.initial_state)
     noise = SensorNoise(SensorErrors(velocity=velocity_noise), SensorErrors(), np.random.default_rng(3),
                         np.random.default_rng(4))
@@ -191,6 +195,16 @@ def test_indi_attitude_loop_does_not_differentiate_the_velocity_noise_again():
     (k_v v): within 3 times, where the third derivative of the noise put them at the rotor limits."""
     indi, se3 = roll_pitch_command_spread('indi', 0.02), roll_pitch_command_spread('se3', 0.02)
     assert indi <= 3.0 * se3, (indi, se3)
+
+
+def test_common_attitude_rates_reaches_indi():
+    """``common.attitude_rates: filter`` gives indi the filtered derivatives of its desired attitude, as it gives
+    every kind: the derivatives of the velocity noise that flatness keeps out then move its roll and pitch
+    commands several times more."""
+    flat = roll_pitch_command_spread('indi', 0.02, attitude_rates='flatness')
+    filtered = roll_pitch_command_spread('indi', 0.02, attitude_rates='filter')
+    print(f'indi U2, U3 spread: {flat:.4f} N (flatness), {filtered:.4f} N (filter)')
+    assert filtered > 3.0 * flat, (flat, filtered)
 
 #: the LMS step of the effectiveness test: 20 times the packaged one, which is kept small so that campaign sensor
 #: noise does not drive the estimate (docs/ADAPTIVE_BASELINES.md); the law is the same (stable for mu in (0, 2))

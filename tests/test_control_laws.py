@@ -146,17 +146,22 @@ def test_integral_smc_law_is_its_formula(seed):
 
 
 # ---------------------------------------------------------------- the cascade's kinds, whole controller
-def reference_attitude_rates(state, reference, h=1e-4):
-    """(phi_r', phi_r'', theta_r', theta_r'') of the reference's own attitude (eq. 10 of its acceleration
-    at the measured heading turning at the reference yaw rate), by central differences in time."""
+def flat_attitude(heading, reference, h=1e-4):
+    """(phi_r, theta_r), their rates and their accelerations: the reference's own attitude (eq. 10 of its
+    acceleration at ``heading`` [rad] turning at the reference yaw rate), by central differences in time."""
     (ax, ay, _), (jx, jy, _), (sx, sy, _) = reference.acceleration, reference.jerk, reference.snap
 
     def attitude(t):
-        psi = state[8] + reference.yaw_rate * t + 0.5 * reference.yaw_acceleration * t * t
+        psi = heading + reference.yaw_rate * t + 0.5 * reference.yaw_acceleration * t * t
         return np.array(attitude_with_thrust_axis((ax + jx * t + 0.5 * sx * t * t, ay + jy * t + 0.5 * sy * t * t,
                                                    VEHICLE.g), psi))
     before, now, after = attitude(-h), attitude(0.0), attitude(h)
-    rate, acceleration = (after - before) / (2 * h), (after - 2 * now + before) / (h * h)
+    return now, (after - before) / (2 * h), (after - 2 * now + before) / (h * h)
+
+
+def reference_attitude_rates(state, reference):
+    """(phi_r', phi_r'', theta_r', theta_r'') of the reference's own attitude at the measured heading."""
+    _, rate, acceleration = flat_attitude(state[8], reference)
     return rate[0], acceleration[0], rate[1], acceleration[1]
 
 
@@ -228,12 +233,14 @@ class SE3Reference:
     def __init__(self, gains=GAINS, params=VEHICLE):
         self.p = params
         self.k = {axis: gains['se3']['axes'][axis] for axis in AXES}
+        self.flatness = gains['common']['attitude_rates'] == 'flatness'
         self.position_integral = np.zeros(3)
         self.attitude_integral = np.zeros(3)
         tau = gains['common']['angle_filter_tau']
         self.blend = DT / (tau + DT)
-        self.previous = None         # (phi_d, theta_d, dphi_d, dtheta_d) of the last update
-        self.rates = np.zeros(4)     # dphi_d, dtheta_d, ddphi_d, ddtheta_d
+        self.previous = None         # (the filters' inputs phi, theta, and their rates) of the last update
+        self.rates = np.zeros(4)     # the filters' outputs: d/dt of their inputs, then d2/dt2 (filter)
+        self.desired_rates = np.zeros(4)   # dphi_d, dtheta_d, ddphi_d, ddtheta_d
 
     def gains(self, which, axes):
         return np.array([self.k[a][which] for a in axes])
@@ -250,19 +257,24 @@ class SE3Reference:
         R = rotation(*state[6:9])
         thrust = force @ R[:, 2]
         phi_d, theta_d = attitude_with_thrust_axis(force, ref.yaw)
+        # filter: the filters differentiate (phi_d, theta_d); flatness: the feedback's part, (phi_d, theta_d)
+        # less the reference's flat attitude at the reference yaw, whose rates are added
+        flat, flat_rate, flat_acceleration = flat_attitude(ref.yaw, ref) if self.flatness else (np.zeros(2),) * 3
+        filtered = np.array([phi_d, theta_d]) - flat
         if self.previous is not None:      # first-order filtered derivatives, rate 0 at the first sample
             old_phi, old_theta, old_dphi, old_dtheta = self.previous
-            d1 = self.rates[:2] + self.blend * ((np.array([phi_d, theta_d]) - [old_phi, old_theta]) / DT
-                                               - self.rates[:2])
+            d1 = self.rates[:2] + self.blend * ((filtered - [old_phi, old_theta]) / DT - self.rates[:2])
             d2 = self.rates[2:] + self.blend * ((d1 - [old_dphi, old_dtheta]) / DT - self.rates[2:])
             self.rates = np.concatenate([d1, d2])
-        self.previous = (phi_d, theta_d, *self.rates[:2])
+        self.previous = (*filtered, *self.rates[:2])
+        self.desired_rates = (np.concatenate([self.rates[:2] + flat_rate, flat_acceleration]) if self.flatness
+                              else self.rates)
         euler_d = (phi_d, theta_d, ref.yaw)
         Rd = rotation(*euler_d)
         assert Rd[:, 2] == pytest.approx(force / np.linalg.norm(force), abs=1e-12)
         assert math.atan2(Rd[1, 0], Rd[0, 0]) == pytest.approx(ref.yaw, abs=1e-12)   # heading = reference yaw
-        omega_d, domega_d = desired_rates(euler_d, (*self.rates[:2], ref.yaw_rate),
-                                          (*self.rates[2:], ref.yaw_acceleration))
+        omega_d, domega_d = desired_rates(euler_d, (*self.desired_rates[:2], ref.yaw_rate),
+                                          (*self.desired_rates[2:], ref.yaw_acceleration))
         omega = body_rates(state[6:9], state[9:12])
         e_R = 0.5 * vee(Rd.T @ R - R.T @ Rd)
         e_W = omega - R.T @ Rd @ omega_d
@@ -276,21 +288,28 @@ class SE3Reference:
         return np.array([thrust, M[0] / p.d, M[1] / p.d, M[2]]), (phi_d, theta_d)
 
 
-def test_se3_is_lee_leok_mcclamroch_away_from_equilibrium():
+@pytest.mark.parametrize('attitude_rates', ['filter', 'flatness'])
+def test_se3_is_lee_leok_mcclamroch_away_from_equilibrium(attitude_rates):
     """Six updates along a moving state (the filters of the desired angles then carry nonzero rates) of
     the controller against the law computed with matrices; R_d has the reference's heading psi_d. The
-    untuned se3 gains: the state was chosen for them so that every desired rate exceeds 0.1 rad/s."""
+    untuned se3 gains: the state was chosen for them so that every desired rate exceeds 0.1 rad/s.
+    ``common.attitude_rates`` reaches se3 as it reaches the cascade's kinds."""
     gains = load_gains('untuned')
+    gains['common']['attitude_rates'] = attitude_rates
+    moving = REFERENCE._replace(jerk=(0.3, -0.2, 0.0), snap=(-0.1, 0.4, 0.0))
     controller, reference = build_controller('se3', VEHICLE, gains), SE3Reference(gains)
     for k in range(6):
         state = [q + k * DT * dq for q, dq in zip(STATE, (*STATE[3:6], 0.0, 0.0, 0.0, *STATE[9:12], 0.0, 0.0, 0.0))]
-        out = controller.update(k * DT, state, REFERENCE)
-        expected, (phi_d, theta_d) = reference.update(state, REFERENCE)
+        out = controller.update(k * DT, state, moving)
+        expected, (phi_d, theta_d) = reference.update(state, moving)
         assert_inside_the_limits(out.forces)
         assert out.attitude_reference[:2] == pytest.approx((phi_d, theta_d), abs=1e-12)
-        # dOmega_d of the reference is a central difference (error ~1e-10 rad/s^2)
-        np.testing.assert_allclose(out.controls, expected, rtol=1e-9, atol=1e-11)
-    assert abs(reference.rates).min() > 0.1    # the desired-rate feed-forward was exercised
+        # dOmega_d of the reference is a central difference (error ~1e-10 rad/s^2), and so are the flat
+        # attitude's rates (about 1e-8 of its accelerations)
+        np.testing.assert_allclose(out.controls, expected, rtol=1e-9 if attitude_rates == 'filter' else 1e-7,
+                                   atol=1e-11)
+    # the desired-rate feed-forward was exercised (flatness: the flat attitude's accelerations are small)
+    assert abs(reference.desired_rates).min() > (0.1 if attitude_rates == 'filter' else 0.01)
 
 
 @pytest.mark.parametrize('height, limit_key', [(1.5, 'max_tilt'), (0.1, 'low_altitude_max_tilt')])   # above take-off

@@ -49,10 +49,13 @@ reads it) before the acceleration filter H (cutoff ``acceleration_filter_hz``), 
 S and H both: a force step d is rejected as the step response s of the cascade S H rises, the part
 left after n steps being d (1 - s(n - 1)) (tests/test_adaptive_baselines.py). T_c then sets
 the thrust axis and the collective thrust as in ``se3`` (tilt limit, minimum lift), and the desired
-attitude is its flat attitude with the reference yaw. The desired body rates and their derivative are
-those of the reference's flat attitude (its acceleration, jerk, snap and yaw motion; Tal & Karaman
-sec. III), not derivatives of the desired attitude: that holds a_f, so two more derivatives would put
-the third derivative of the velocity noise into alpha_d.
+attitude is its flat attitude with the reference yaw. The desired body rates and their derivative come
+from ``common.attitude_rates``, the key every kind reads: with ``filter``, two filtered derivatives of the
+desired attitude (:class:`.se3.SE3Controller`); with ``flatness``, those of the reference's flat attitude
+alone (its acceleration, jerk, snap and yaw motion; Tal & Karaman sec. III). Unlike the other kinds'
+``flatness``, no filtered derivative of the feedback's part is added: that part holds a_f, so its
+derivative would put the second derivative of the velocity noise into the desired rates (measured: the
+packaged indi then lost the x500 in tests/test_vehicles.py).
 
 What it measures: body rates and velocity (it differentiates both: the odometry here carries no
 accelerometer, so its alpha_f and a_f are filtered derivatives, with noise amplified by the
@@ -206,11 +209,11 @@ class INDIController(SE3Controller):
         return [xp.where(held, m, i) for m, i in zip(model, incremental)]
 
     def desired_attitude_rates(self, phi_d, theta_d, reference, z) -> tuple:
-        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2]: those of the reference's flat attitude, from its
-        acceleration, jerk, snap and yaw motion (differential flatness, :func:`.controller.flat_attitude_of`),
-        not derivatives of phi_d, theta_d: these come from T_c, which holds a_f, itself a filtered derivative of the
-        measured velocity, and two more derivatives would feed the attitude loop the third derivative of the
-        velocity noise (module docstring)."""
+        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2] by ``attitude_rates``: with ``flatness`` those of the
+        reference's flat attitude alone (module docstring), with ``filter`` the filtered derivatives of phi_d,
+        theta_d [rad] (:meth:`.se3.SE3Controller.desired_attitude_rates`)."""
+        if self.attitude_rates != 'flatness':
+            return super().desired_attitude_rates(phi_d, theta_d, reference, z)
         (ax, ay, _), (jx, jy, _), (sx, sy, _) = reference.acceleration, reference.jerk, reference.snap
         _, dphi, ddphi, _, dtheta, ddtheta = flat_attitude_of(ax, ay, jx, jy, sx, sy, reference.yaw, reference.yaw_rate,
                                                               reference.yaw_acceleration, z, self.params.g,

@@ -33,13 +33,15 @@ INDI_KEYS = ('rate_filter_hz', 'acceleration_filter_hz', 'motor_time_constant', 
 
 
 def _structure(gains: Mapping[str, Any], batch: int | None) -> dict:
-    """What every kind's structure reads of ``common``: tilt limits, the angle filter, the allocation, the take-off."""
-    from .factory import _non_negative, _positive
+    """What every kind's structure reads of ``common``: tilt limits, the angle filter and the attitude rates, the
+    allocation, the take-off."""
+    from .factory import _get, _non_negative, _positive
     return dict(max_tilt=_positive(gains, 'common.max_tilt'),
                 low_altitude_max_tilt=_positive(gains, 'common.low_altitude_max_tilt'),
                 low_altitude_height=_non_negative(gains, 'common.low_altitude_height'),
                 angle_filter_tau=_positive(gains, 'common.angle_filter_tau'),
                 allocation=gains.get('common', {}).get('allocation', 'priority'),
+                attitude_rates=_get(gains, 'common.attitude_rates'),
                 takeoff_height=_non_negative(gains, 'common.takeoff_height'), batch=batch)
 
 
@@ -53,12 +55,12 @@ def _cascaded(laws):
     """The build of a cascaded kind whose law of each subsystem is ``laws(name, gains, axis, lambda, dt, batch,
     params)``."""
     def build(name: str, params: VehicleParams, gains: Mapping[str, Any], batch: int | None) -> CascadedController:
-        from .factory import _get, control_period
+        from .factory import control_period
         dt = control_period(gains)
         lam = _slopes(gains)
         return CascadedController(name, params, {axis: laws(name, gains, axis, lam[axis], dt, batch, params)
                                                  for axis in AXES}, dt,
-                                  **_structure(gains, batch), attitude_rates=_get(gains, 'common.attitude_rates'))
+                                  **_structure(gains, batch))
     return build
 
 

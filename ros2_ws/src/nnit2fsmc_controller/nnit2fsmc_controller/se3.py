@@ -27,9 +27,12 @@ Choices (docs/BASELINES.md):
   R_d is the Z-Y-X attitude with the reference yaw psi_d and thrust axis b3_d, so that the heading
   is the paper's yaw angle psi, the one the metrics and the other controllers track.
 * Omega_d and dOmega_d: from the Euler rates of (phi_d, theta_d, psi_d): psi_d' and psi_d'' are the
-  reference's; phi_d', theta_d' and their derivatives are filtered derivatives (time constant
-  ``angle_filter_tau``), as in the cascade's eq. (10). Omega_d is the exact body-rate map of those
-  rates and dOmega_d its exact time derivative.
+  reference's; phi_d', theta_d' and their derivatives come from ``common.attitude_rates``, as in every
+  kind (:class:`.controller.CascadedController`): ``filter``, filtered derivatives of phi_d, theta_d (time
+  constant ``angle_filter_tau``), as in the cascade's eq. (10); ``flatness``, the rates of the reference's
+  flat attitude (phi_r, theta_r from its acceleration, jerk, snap and yaw motion) plus the filtered
+  derivative of the feedback's part phi_d - phi_r, and the flat attitude's second derivative. Omega_d is the
+  exact body-rate map of those rates and dOmega_d its exact time derivative.
 * The nominal model's drag terms (translational 5.6e-4 N s/m, rotational friction) are not fed
   forward: Lee et al. have none, and they are below 1e-3 of the weight on the paper flight.
 
@@ -52,11 +55,12 @@ from quad_msgs_bridge.frames import body_rates_from_euler_rates, rotation_from_e
 from quad_msgs_bridge.mixer import allocate, controls_from_forces
 from quad_msgs_bridge.numeric import namespace_for
 from quad_msgs_bridge.reference import ReferenceSample
-from quad_msgs_bridge.validation import check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 from quad_msgs_bridge.vehicle_params import VehicleParams
 
 from .axis_laws import AxisOutput
-from .controller import AXES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_inputs, finite_output
+from .controller import (AXES, ATTITUDE_RATES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_inputs,
+                         finite_output, flat_attitude_of)
 
 #: minimum vertical part of the desired force, in units of m g (keeps b3_d pointing up)
 MIN_LIFT = 0.1
@@ -112,8 +116,8 @@ class SE3Controller:
 
     def __init__(self, name: str, params: VehicleParams, gains: dict, lam: dict, dt: float,
                  max_tilt: float = 0.6, angle_filter_tau: float = 0.02, allocation: str = 'priority',
-                 low_altitude_max_tilt: float | None = None, low_altitude_height: float = 0.0,
-                 takeoff_height: float = 0.0, batch: int | None = None):
+                 attitude_rates: str = 'filter', low_altitude_max_tilt: float | None = None,
+                 low_altitude_height: float = 0.0, takeoff_height: float = 0.0, batch: int | None = None):
         self.name = name
         self.params = params
         self.batch = batch   #: None: one vehicle; B: update takes 12 arrays of B values
@@ -125,6 +129,9 @@ class SE3Controller:
         self.tilt_limit = TiltLimit(max_tilt, low_altitude_max_tilt, low_altitude_height)
         tau = check_number('angle_filter_tau', angle_filter_tau, 0.0, low_inclusive=False)
         self.allocation = check_allocation(allocation)
+        if attitude_rates not in ATTITUDE_RATES:
+            raise ParameterError(f'common.attitude_rates: {attitude_rates!r} is not one of {", ".join(ATTITUDE_RATES)}')
+        self.attitude_rates = attitude_rates
         self._filters = {name: RateFilter(self.dt, tau) for name in ('dphi', 'ddphi', 'dtheta', 'ddtheta')}
         #: [m, world z] below it the vehicle lifts off level and the x, y and attitude integrals hold (0: off);
         #: the take-off hold every controller kind shares (:class:`.controller.CascadedController`)
@@ -159,10 +166,18 @@ class SE3Controller:
         return force
 
     def desired_attitude_rates(self, phi_d, theta_d, reference: ReferenceSample, z) -> tuple:
-        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2] of the desired roll and pitch phi_d, theta_d [rad]:
-        their filtered derivatives (``angle_filter_tau``). The reference and the height z [m] serve the kinds that
-        take them from the reference instead (:mod:`.indi`)."""
+        """(dphi_d, ddphi_d, dtheta_d, ddtheta_d) [rad/s, rad/s^2] of the desired roll and pitch phi_d, theta_d [rad]
+        by ``attitude_rates`` (module docstring): their filtered derivatives (``angle_filter_tau``), or the flat
+        attitude of the reference at its yaw and the height z [m] (tilt limit) plus the filtered derivative of
+        the feedback's part."""
         f = self._filters
+        if self.attitude_rates == 'flatness':
+            (ax, ay, _), (jx, jy, _), (sx, sy, _) = reference.acceleration, reference.jerk, reference.snap
+            phi_r, dphi_r, ddphi_r, theta_r, dtheta_r, ddtheta_r = flat_attitude_of(
+                ax, ay, jx, jy, sx, sy, reference.yaw, reference.yaw_rate, reference.yaw_acceleration, z,
+                self.params.g, self.tilt_limit.kernel_parameters)
+            return (dphi_r + f['dphi'].update(phi_d - phi_r), ddphi_r,
+                    dtheta_r + f['dtheta'].update(theta_d - theta_r), ddtheta_r)
         dphi_d = f['dphi'].update(phi_d)
         dtheta_d = f['dtheta'].update(theta_d)
         return dphi_d, f['ddphi'].update(dphi_d), dtheta_d, f['ddtheta'].update(dtheta_d)
