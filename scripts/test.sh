@@ -14,8 +14,9 @@
 #   its colcon install sourced) are found; elsewhere it prints what is missing and skips, in a second. SKIP_PX4=1
 #   leaves it out.
 # The four environments are set up at the same time, and the first run starts as soon as .venv is ready (the tests
-# needing the CPUs to themselves wait for every set-up to end); each run spreads its tests over one pytest-xdist worker per
-# CPU (TEST_WORKERS=N sets another count; the tests sharing a module-scoped flight stay on one worker: conftest.py).
+# needing the CPUs to themselves wait for every set-up to end); each run spreads its tests over one pytest-xdist
+# worker per CPU (TEST_WORKERS=N sets another count; the tests sharing a module-scoped flight stay on one worker:
+# conftest.py).
 # --quick (first argument): the lane to run before every commit: .venv only, without the tests marked slow or ros.
 # Each run says which ROS 2 it used. Extra arguments go to pytest; pytest's "no tests collected" (exit code 5,
 # e.g. a file without ROS tests in the wheels run) is not a failure.
