@@ -133,7 +133,7 @@ def _fly(job: BatchJob, steps: int | None) -> list[dict]:
                          'settled_steps': int(_element(statistics.settled_steps, i))},
                 failure=int(loop.failure[i]), failure_time=float(loop.failure_time[i]),
                 biases=[_element(b, i) for b in biases],
-                actuator=spec.world.actuator(spec.seed, conditions[i].flight, setup.control_dt))
+                actuator=perturbations.actuators[i])
             for i in range(size)]
 
 

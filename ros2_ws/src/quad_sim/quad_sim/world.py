@@ -178,6 +178,9 @@ class Perturbations:
     motor_lag: MotorLag | None = None
     wind: Wind | None = None
     changes: tuple[VehicleChange, ...] = ()     #: the true vehicle changing mid-flight (payload, rotor loss)
+    #: (motor time constant [s], transport delay [s]) of each flight, as :func:`build_perturbations` had the world
+    #: give them (:meth:`World.actuator`); empty when the perturbations were put together by hand
+    actuators: tuple[tuple[float, float], ...] = ()
 
 
 def wind_direction(world: World, seed: int, flight: int) -> float:
@@ -220,16 +223,19 @@ def build_perturbations(world: World, seed: int, flights: Sequence[int], vehicle
 
 def _actuators(world: World, seed: int, flights: Sequence[int], control_dt: float, physics_dt: float,
                batch: bool) -> dict:
-    """The delay and motor lag of ``flights``: one for all when the world fixes them, else one per flight."""
+    """The delay and motor lag of ``flights`` (one for all when the world fixes them, else one per flight), and each
+    flight's (lag, delay) [s]."""
+    actuators = tuple(world.actuator(seed, flight, control_dt) for flight in flights)
     delay, lag = world.delay_s, world.motor_time_constant_s
     if isinstance(delay, Range) or isinstance(lag, Range):
-        lags, delays = zip(*(world.actuator(seed, flight, control_dt) for flight in flights))
+        lags, delays = zip(*actuators)
         steps = np.array([round(d / control_dt) for d in delays])
         lag = np.array(lags) if batch else lags[0]
         return {'delay': (TransportDelay(steps) if batch else TransportDelay(int(steps[0]))) if steps.any() else None,
-                'motor_lag': MotorLag(lag, physics_dt) if np.any(np.asarray(lag) > 0.0) else None}
+                'motor_lag': MotorLag(lag, physics_dt) if np.any(np.asarray(lag) > 0.0) else None,
+                'actuators': actuators}
     return {'delay': TransportDelay.from_seconds(delay, control_dt) if delay > 0.0 else None,
-            'motor_lag': MotorLag(lag, physics_dt) if lag > 0.0 else None}
+            'motor_lag': MotorLag(lag, physics_dt) if lag > 0.0 else None, 'actuators': actuators}
 
 
 def vehicle_changes(true_vehicle: VehicleParams, events: Mapping[str, Any], duration: float) -> tuple[VehicleChange, ...]:
