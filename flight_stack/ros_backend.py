@@ -42,7 +42,7 @@ import yaml
 from nnit2fsmc_controller.trajectory import make_scenario
 from quad_msgs_bridge.bag.flight_bag import DURATION_KEY, MAX_ERROR_KEY, disturbances_label, ros_flight_custom_data
 from quad_msgs_bridge.bag.merge import merge_parts
-from quad_msgs_bridge.contract import RECORDED_TOPICS, vehicle_namespaces
+from quad_msgs_bridge.contract import GROUND_TRUTH, PER_STEP_TOPICS, RECORDED_TOPICS, TF, vehicle_namespaces
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
 from quad_sim.plants import PX4_CONTROLLER, PX4_SITL
@@ -52,6 +52,8 @@ from .processes import NodeProcess, node_command, source_tree_environment, stop_
 
 
 EXTRA_SUBSCRIBER_DELAY = 1.0   #: [s, wall] the simulator waits once extra odom subscribers are there
+#: the per-step topics of a flight's simulator and controllers (and /tf, where the simulator broadcasts it)
+PER_STEP_FLOWN = tuple(t.name for t in PER_STEP_TOPICS if t not in (GROUND_TRUTH, TF))
 RECORD_BY = ('recorder', 'publishers')   #: who writes a flight's bag (RosFlightConfig.record_by)
 
 
@@ -75,6 +77,9 @@ class RosFlightConfig:
     settle_time: float = 5.0
     quiet: bool = False
     extra_odom_subscribers: int = 0   #: further odom subscribers the simulator waits for (e.g. a ros2 bag record)
+    #: further readers of every per-step topic (a recorder of them all): the simulator and the controllers match
+    #: them before the first step and the first answer, so they miss nothing
+    extra_recorders: int = 0
     record: bool = True       #: False: no bag (for timing the bare three-node loop)
     #: who writes the bag: 'publishers' (each node logs what it publishes, merged into the bag after the flight:
     #: see quad_msgs_bridge.bag.publication_log) or 'recorder' (the record node, one more reader of every topic)
@@ -135,6 +140,10 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     logged = {'record_dir': str(parts)} if parts else {}    # each node's own publication log
     if parts is not None:
         shutil.rmtree(parts, ignore_errors=True)
+    # readers of every per-step topic beside the flight's own: the writers wait for them (the recorder counts where
+    # it records all; else its own gate, matched on its readers' side, is what it has)
+    per_step = set(PER_STEP_FLOWN) | ({TF.name} if config.publish_tf else set())
+    recorders = config.extra_recorders + (recorder and per_step <= set(config.topics))
     nodes = [('recorder', 'quad_msgs_bridge', 'record', 'quad_msgs_bridge.bag.recorder_node', home,
               {'bag': str(config.bag), 'overwrite': True, 'topics': config.topics, 'controller': config.controller,
                'scenario': config.scenario, 'seed': config.seed, 'settle_time': config.settle_time,
@@ -153,14 +162,15 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
              # it stamps with the odometry's stamp and reads no clock (its odometry watchdog runs on the steady
              # clock): no use_sim_time either, which spares a /clock callback per step (11 % of the lockstep rate)
              {'use_sim_time': False, 'controller': config.controller, 'nnit2fsmc.seed': config.seed,
-              'latest_only': config.mode == 'realtime', **vehicle, **logged,
+              'latest_only': config.mode == 'realtime', 'wait_for_recorders': recorders, **vehicle, **logged,
               **({'gains_file': str(config.gains_file)} if config.gains_file else {})})]
     nodes.append(
         ('sim', 'quad_sim', 'quad_sim', 'quad_sim.sim_node', home,
          {'duration': config.duration, 'exit_at_end': True, 'disturbances': config.disturbances,
           'physics_rate': config.physics_rate, 'odometry_rate': config.control_rate, 'mode': config.mode,
           'speed_factor': config.speed_factor, 'plant': config.plant,
-          'wait_for_subscribers': (2 if recorder else 1) + config.extra_odom_subscribers,
+          'wait_for_subscribers': (2 if recorder else 1) + config.extra_odom_subscribers + config.extra_recorders,
+          'wait_for_recorders': recorders,
           # an outside recorder subscribes to odom among its other topics: give those time to match too
           'start_delay': EXTRA_SUBSCRIBER_DELAY if config.extra_odom_subscribers else 0.0,
           'initial_state': initial_states, 'publish_tf': config.publish_tf, **fleet, **vehicle, **logged}))

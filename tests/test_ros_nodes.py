@@ -637,6 +637,47 @@ def test_non_finite_input_is_answered_with_finite_forces_and_the_bad_message_is_
     assert after.position[2] == 0.0
 
 
+def test_the_controller_holds_its_first_answer_until_its_outputs_have_matched_their_recorders(ros_node):
+    """``wait_for_recorders: 1``: the controller answers no odometry while ``rotor_forces`` has one reader (not the
+    recorder and the simulator) and ``control/*`` none; once this node has made the readers, on their writers' side,
+    the held odometry is answered, once, on every output."""
+    namespace = 'heldanswer'
+    kit = rclpy_kit()
+    hover = Hover(position=(0.0, 0.0, 1.0))
+    got = {topic.name: [] for topic in (ROTOR_FORCES, CONTROL_WRENCH, CONTROL_REFERENCE, CONTROL_DIAGNOSTICS)}
+
+    def reader(topic):
+        return subscription(ros_node, kit, topic, got[topic.name].append, raw=True, namespace=namespace)
+
+    readers = [reader(ROTOR_FORCES)]
+    odom_pub = ros_node.create_publisher(kit[ODOM.type], resolve(ODOM, namespace), qos_profile(ODOM.qos))
+    processes = [
+        node_process('trajectory', 'nnit2fsmc_controller.trajectory_node', namespace,
+                     {'scenario': 'hover', 'start_time': 0.0, 'use_sim_time': True}),
+        node_process('controller', 'nnit2fsmc_controller.controller_node', namespace,
+                     {'use_sim_time': True, 'wait_for_recorders': 1}),
+    ]
+    controller = processes[1]
+    try:
+        assert spin_until(ros_node, lambda: odom_pub.get_subscription_count() >= 1
+                          and readers[0].get_publisher_count() >= 1, timeout=HANG_TIMEOUT_S)
+        odom_pub.publish(odometry_msg(kit, odometry_from_state(1e-3, hover.initial_state)))
+        assert spin_until(ros_node, lambda: any('holding the first answer until' in line for line in controller.lines),
+                          timeout=HANG_TIMEOUT_S), '\n'.join(controller.lines)
+        assert spin_until(ros_node, lambda: False, timeout=1.0) is False     # one more second: still no answer
+        assert got[ROTOR_FORCES.name] == []
+        readers += [reader(ROTOR_FORCES)] + [reader(topic) for topic in (CONTROL_WRENCH, CONTROL_REFERENCE,
+                                                                          CONTROL_DIAGNOSTICS)]
+        assert spin_until(ros_node, lambda: all(len(messages) >= 2 if name == ROTOR_FORCES.name else messages
+                                                for name, messages in got.items()), timeout=HANG_TIMEOUT_S), got
+    finally:
+        codes = stop_all(processes)
+    assert all(code == 0 for code in codes.values()), codes
+    # the answer to the held odometry, on the first forces reader and the second alike, and each output once
+    assert [len(messages) for messages in got.values()] == [2, 1, 1, 1]
+    assert got[ROTOR_FORCES.name][0] == got[ROTOR_FORCES.name][1]
+
+
 def odometry_stamps_and_publish_times(bag, namespace) -> tuple[np.ndarray, np.ndarray]:
     """Header stamps and publish (send, wall) times [s] of the odometry recorded in ``bag``."""
     from quad_msgs_bridge.fast_cdr import decode_odometry

@@ -14,7 +14,8 @@ weights, filters and integrators carried over. ``control/diagnostics`` carries t
 lambda in effect at each update. Gains that need a restart (and the node parameters) are read-only.
 
 Failure behaviour: odometry that arrives before any setpoint is held and answered when the first
-setpoints arrive; a repeated odometry (the stamp last answered) is ignored; an older stamp means
+setpoints arrive, and until every output has matched ``wait_for_recorders`` readers besides the
+simulator (recorders: none of the first answers is lost to them); a repeated odometry (the stamp last answered) is ignored; an older stamp means
 the simulator restarted, and the controller starts afresh (NN weights, filters) and answers it;
 non-finite odometry or setpoints are rejected with a throttled error, and the last valid forces
 (hover thrust if none) are published instead, so a non-finite force is never published.
@@ -35,7 +36,7 @@ from quad_msgs_bridge.fast_cdr import (decode_odometry, diagnostics_encoder, pos
                                        wrench_encoder)
 from quad_msgs_bridge.frames import wrap_angle
 from quad_msgs_bridge.reference import SetpointPath
-from quad_msgs_bridge.ros_helpers import declare, publication_log, publisher, run_node, subscription
+from quad_msgs_bridge.ros_helpers import declare, publication_log, publisher, run_node, subscription, unmatched
 from quad_msgs_bridge.state import PSI, state_from_odometry
 from quad_msgs_bridge.timebase import nanoseconds, seconds, stamp_fields
 from quad_msgs_bridge.validation import ParameterError
@@ -102,6 +103,14 @@ class ControllerNode(Node):
         self.wrench_pub = publisher(self, kit, CONTROL_WRENCH, log=self.publication_log)
         self.reference_pub = publisher(self, kit, CONTROL_REFERENCE, log=self.publication_log)
         self.diagnostics_pub = publisher(self, kit, CONTROL_DIAGNOSTICS, log=self.publication_log)
+        recorders = declare(self, 'wait_for_recorders', 0,
+                            'answer once rotor_forces and control/* have matched this many subscribers each beside '
+                            'the simulator (recorders of every topic); 0: answer at once', (0, 1000),
+                            read_only='checked before the first answer')
+        #: (publisher, readers it must have matched before the first answer)
+        self.wanted_readers = [(self.forces_pub, recorders + 1)] + [
+            (pub, recorders) for pub in (self.wrench_pub, self.reference_pub, self.diagnostics_pub)] if recorders else []
+        self.match_retry = None     #: a timer that retries the pending odometry while the outputs match
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs;
         # in realtime (latest_only) a controller that falls behind skips to the newest odometry
         self.encode_forces = rotor_forces_encoder(self.params.rotor_names)
@@ -141,12 +150,31 @@ class ControllerNode(Node):
             return      # a repeat of the odometry already answered
         if stamp_ns < self.last_answered_ns:
             self.restart(stamp_ns)
-        if self.path is None:
-            if self.pending is None:
+        if self.path is None or not self.outputs_matched():
+            if self.pending is None and self.path is None:
                 self.get_logger().info('odometry received; waiting for setpoints or a goal_pose before answering')
             self.pending = (sample, state)
             return
         self.answer(sample, state)
+
+    def outputs_matched(self) -> bool:
+        """Whether every output has matched its ``wait_for_recorders`` readers, on its own side
+        (ros_helpers.unmatched); checked from the first odometry until it holds, meanwhile a steady timer retries
+        the pending odometry."""
+        if not self.wanted_readers:
+            return True
+        missing = unmatched(self.wanted_readers)
+        if missing:
+            if self.match_retry is None:
+                self.match_retry = self.create_timer(0.01, self.answer_pending,
+                                                     clock=Clock(clock_type=ClockType.STEADY_TIME))
+            self.get_logger().info(f'holding the first answer until {", ".join(missing)} matched their readers',
+                                   throttle_duration_sec=5.0)
+            return False
+        self.wanted_readers = []
+        if self.match_retry is not None:
+            self.match_retry.cancel()
+        return True
 
     def answer(self, sample, state) -> None:
         t = sample.stamp
@@ -233,7 +261,7 @@ class ControllerNode(Node):
         self.answer_pending()
 
     def answer_pending(self) -> None:
-        if self.pending is not None:
+        if self.pending is not None and self.path is not None and self.outputs_matched():
             pending, self.pending = self.pending, None
             self.answer(*pending)
 

@@ -48,6 +48,15 @@ def publisher(node: Node, kit: MessageKit, topic: TopicSpec, namespace: str | No
     return created if log is None else log.recording(created, topic)
 
 
+def unmatched(wanted: Sequence[tuple[Any, int]]) -> list[str]:
+    """The topics of the (publisher, readers) pairs in ``wanted`` whose publisher has matched fewer readers than
+    that, on its own side (rclpy's matched count). A writer and a reader match each on its own side: a reader that
+    has matched the writer still misses what the writer sends before the writer has matched it (a test's reader of
+    the controller's rotor_forces missed the first answers on a loaded CI machine). The ROS graph shows
+    discovered endpoints, not matches, and can lag behind them: counts, not the graph."""
+    return [pub.topic_name for pub, readers in wanted if pub.get_subscription_count() < readers]
+
+
 def publication_log(node: Node, sim_time_ns: Callable[[], int]) -> PublicationLog | None:
     """Declare the node's ``record_dir`` parameter; if set, the log its publishers record into (its part bag in
     that directory: see quad_msgs_bridge.bag.publication_log), else None. ``sim_time_ns()``: the log time [ns,

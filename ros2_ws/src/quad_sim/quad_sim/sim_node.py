@@ -39,7 +39,7 @@ from quad_msgs_bridge.contract import (CLOCK, ODOM, ODOM_FRAME, ROTOR_FORCES, TF
                                       vehicle_namespaces)
 from quad_msgs_bridge.conversions import MessageKit, rosbags_kit
 from quad_msgs_bridge.fast_cdr import clock_encoder, decode_rotor_forces, odometry_encoder, tf_encoder
-from quad_msgs_bridge.ros_helpers import (declare, publication_log, publisher, run_node, subscription,
+from quad_msgs_bridge.ros_helpers import (declare, publication_log, publisher, run_node, subscription, unmatched,
                                           wait_for_acknowledgements)
 from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
 from quad_msgs_bridge.urdf import description_messages
@@ -78,6 +78,10 @@ class SimNode(Node):
         self.wait_for_subscribers = declare(
             self, 'wait_for_subscribers', 1,
             "start once each vehicle's odom has this many subscribers (its controller, plus any recorder)", (1, 1000))
+        self.wait_for_recorders = declare(
+            self, 'wait_for_recorders', 0,
+            'start once /clock and /tf have this many subscribers each (recorders of every topic; their odom '
+            'subscriptions count in wait_for_subscribers)', (0, 1000))
         self.start_delay = declare(self, 'start_delay', 0.0,
                                    'wall seconds to wait once the subscribers are there, before the first step '
                                    '(a late recorder such as ros2 bag record then has all its topics matched)',
@@ -215,15 +219,17 @@ class SimNode(Node):
         return self.fleet.set_forces(vehicle, forces)
 
     def ready(self) -> bool:
-        """Start ``start_delay`` after every vehicle's ``odom`` publisher has matched its subscribers and its
-        ``rotor_forces`` subscription a controller's publisher. Matched, not merely discovered (the ROS graph): a
-        message sent to a discovered reader not yet matched is not delivered, and the lockstep then waits forever
-        for its answer (seen with the simulator on Fast DDS and the controller on Cyclone DDS)."""
+        """Start ``start_delay`` after every vehicle's ``odom`` publisher has matched its ``wait_for_subscribers``
+        subscribers, ``/clock`` and ``/tf`` each ``wait_for_recorders`` readers, and every ``rotor_forces``
+        subscription a controller's publisher. Matched, not merely discovered (the ROS graph): a message sent to a
+        discovered reader not yet matched is not delivered, and the lockstep then waits forever for its answer (seen
+        with the simulator on Fast DDS and the controller on Cyclone DDS), or a recorder misses the first steps."""
         if self.started:
             return True
         now = time.monotonic()
-        if not all(odom.get_subscription_count() >= self.wait_for_subscribers and forces.get_publisher_count() > 0
-                   for odom, forces in zip(self.odom_pubs, self.forces_subs)):
+        wanted = [(odom, self.wait_for_subscribers) for odom in self.odom_pubs] + [
+            (pub, self.wait_for_recorders) for pub in (self.clock_pub, self.tf_pub) if pub is not None]
+        if unmatched(wanted) or not all(forces.get_publisher_count() > 0 for forces in self.forces_subs):
             self.subscribed_since = None
         elif self.subscribed_since is None:
             self.subscribed_since = now
