@@ -112,6 +112,22 @@ def test_the_objective_is_the_median_with_failures_and_penalises_below_99_percen
     assert objective(rows([0.02], 2), 0.5).median_rmse_m == 0.5
 
 
+def test_the_tail_objective_is_the_95th_percentile_under_the_same_finished_rule():
+    def rows(rmse, failed):
+        return ([{'finished': True, 'rmse_position_m': r} for r in rmse]
+                + [{'finished': False, 'rmse_position_m': math.nan}] * failed)
+    flights = rows([0.01] * 90 + [0.2] * 10, 0)      # a good median, a bad tail
+    median, tail = objective(flights, 1.0), objective(flights, 1.0, 'p95')
+    assert median.objective_m == pytest.approx(0.01) and tail.objective_m == pytest.approx(0.2)
+    assert median.p95_rmse_m == tail.p95_rmse_m == pytest.approx(0.2)
+    # a failure counts as max_error_m in the tail too; below 99 % finished the same penalty for both
+    assert objective(rows([0.01] * 198, 2), 1.0, 'p95').objective_m == pytest.approx(0.01)
+    assert objective(rows([0.01] * 98, 2), 1.0, 'p95').objective_m == pytest.approx(1.02)
+    assert objective(rows([0.01] * 93, 6), 1.0, 'p95').p95_rmse_m == pytest.approx(1.0)
+    with pytest.raises(ParameterError, match='--objective'):
+        objective(flights, 1.0, 'p99')
+
+
 # --- tune ----------------------------------------------------------------------------------------
 
 def test_tune_writes_gains_no_worse_than_the_start_on_the_same_flights_and_resumes(scheduler, tmp_path):
@@ -129,6 +145,14 @@ def test_tune_writes_gains_no_worse_than_the_start_on_the_same_flights_and_resum
     assert [row['trial'] for row in table] == ['0', '1'] and table[0]['starting_gains'] == 'True'
     best = min((row for row in table if row['state'] == 'complete'), key=lambda row: float(row['objective_m']))
     assert values_in(gains, 'pid') == pytest.approx({name: float(best[name]) for name in values_in(gains, 'pid')})
+    # the picks by each statistic from the same trials: the median's is the objective's, the tail's the trial with
+    # the smallest p95 (the trials table's column), each a gains file
+    assert first.picks['median'][0] == first.best_trial
+    assert (out / 'gains-pid-median.yaml').read_text().split('\n', 1)[1] == gains_file.read_text().split('\n', 1)[1]
+    tail = min((row for row in table if row['state'] == 'complete'), key=lambda row: float(row['p95_rmse_m']))
+    assert first.picks['p95'][:2] == (int(tail['trial']), pytest.approx(float(tail['p95_rmse_m'])))
+    tail_gains = load_gains(out / 'gains-pid-p95.yaml')
+    assert values_in(tail_gains, 'pid') == pytest.approx({name: float(tail[name]) for name in values_in(gains, 'pid')})
 
     # the tuned gains and the packaged ones flown again, as plain campaigns on the same flights
     def flown(gains_path, folder):

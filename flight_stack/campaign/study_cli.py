@@ -63,6 +63,10 @@ def tune_main(argv: list[str]) -> int:
     parser.add_argument('--trials', type=int, required=True, help='trials in the study, >= 1 (the budget)')
     parser.add_argument('--seeds', default='1,2', help='tuning campaign seeds, comma-separated (default 1,2)')
     parser.add_argument('--sampler-seed', type=int, default=0, help='seed of the TPE sampler (default 0)')
+    parser.add_argument('--objective', choices=('median', 'p95'), default='median',
+                        help="the statistic of the flights' position RMSE minimised, subject to 99 %% finished "
+                             '(default median; p95: the tail). Either way gains-KIND-median.yaml and '
+                             'gains-KIND-p95.yaml hold the pick of each from the same trials')
     args = parser.parse_args(argv)
     from .spec import load_spec
     from .tune import TuneSetup, parse_seeds, tune
@@ -72,7 +76,7 @@ def tune_main(argv: list[str]) -> int:
         spec = load_spec(args.spec).overridden(flights=args.flights, duration=args.duration,
                                                controllers=[args.controller])
         setup = TuneSetup(args.controller, spec, parse_seeds(args.seeds), args.trials, args.out,
-                          _run_options(args), args.sampler_seed)
+                          _run_options(args), args.sampler_seed, args.objective)
         print(f'tune {setup.kind}: {setup.trials} trials x {len(setup.seeds)} seed(s) {args.seeds} x {spec.flights} '
               f'flights of "{spec.scenario}", {spec.duration:g} s each -> {args.out}', file=sys.stderr)
         outcome = tune(setup, progress=not args.quiet)
@@ -83,8 +87,10 @@ def tune_main(argv: list[str]) -> int:
         print(f'interrupted; run the same command again to continue the study in {args.out} (the interrupted '
               'trial is flown again, its finished flights kept)', file=sys.stderr)
         return 130
-    print(f'best: trial {outcome.best_trial}, objective {outcome.best_objective_m * 100:.3f} cm '
+    print(f'best: trial {outcome.best_trial}, objective ({setup.objective}) {outcome.best_objective_m * 100:.3f} cm '
           f'(starting gains: {outcome.starting_objective_m * 100:.3f} cm), {outcome.trials} trials')
+    for statistic, (trial, value, path) in outcome.picks.items():
+        print(f'pick by {statistic}: trial {trial}, {value * 100:.3f} cm: {path}')
     print(f'gains: {outcome.gains_path}\ntrials: {outcome.table_path}')
     return 0
 

@@ -9,12 +9,17 @@ each seed's campaign. The first trial is the gains the tuning starts from (the p
 ``--gains``), flown on every seed and never pruned, so the best trial is never worse than they are
 on the same flights.
 
-The objective (:func:`objective`), in metres, smaller is better: over every tuning flight, the median of
-the position RMSE, where a flight that failed counts as ``max_error_m`` (no finished flight is worse:
-its error stayed below it after settling); if fewer than 99 % of the flights finished, it is
-``max_error_m * (2 - finished share)`` instead, which is worse than any gains that finish 99 %. A point
-whose gains the controller refuses for the nominal vehicle scores ``2 max_error_m``, as bad as gains
-whose every flight fails.
+The objective (:func:`objective`), in metres, smaller is better: over every tuning flight, a statistic of
+the position RMSE (``--objective``: ``median``, the default, or ``p95``, its 95th percentile: the tail), where
+a flight that failed counts as ``max_error_m`` (no finished flight is worse: its error stayed below it after
+settling); if fewer than 99 % of the flights finished, it is ``max_error_m * (2 - finished share)`` instead,
+which is worse than any gains that finish 99 %. A point whose gains the controller refuses for the nominal
+vehicle scores ``2 max_error_m``, as bad as gains whose every flight fails.
+
+Every trial records both statistics, so one study gives two picks by the same rule (each statistic subject to
+99 % finished, among the trials flown on every seed): ``gains-KIND-median.yaml`` and ``gains-KIND-p95.yaml``
+beside ``gains-KIND.yaml`` (the objective's pick, the study's best). Pruning follows the objective: the other
+statistic's pick is among the trials the objective let finish.
 """
 from __future__ import annotations
 
@@ -42,6 +47,8 @@ from .spec import CampaignSpec
 STUDY_FILE = 'study.journal'
 LOCK_FILE = '.tune.lock'
 REQUIRED_FINISHED_SHARE = 0.99
+#: the statistics of the flights' RMSE a study can minimise (--objective); every trial records each
+OBJECTIVES = ('median', 'p95')
 #: TPE's random start: trials sampled at random before it models the objective
 STARTUP_TRIALS = 5
 #: the largest --sampler-seed: the sampler's seed is it plus the trials already made, which numpy takes below 2^32
@@ -54,6 +61,7 @@ class Score:
 
     objective_m: float         #: see :func:`objective`
     median_rmse_m: float       #: median RMSE with failures counted as max_error_m
+    p95_rmse_m: float          #: its 95th percentile (numpy's linear interpolation), failures likewise
     finished: int
     flights: int
 
@@ -62,16 +70,31 @@ class Score:
         return self.finished / self.flights if self.flights else 0.0
 
 
-def objective(rows: list[dict], max_error_m: float) -> Score:
-    """The tuning objective [m] of the flights ``rows`` (flights.csv rows; see the module docstring)."""
+def objective(rows: list[dict], max_error_m: float, statistic: str = 'median') -> Score:
+    """The tuning objective [m] of the flights ``rows`` (flights.csv rows) by ``statistic`` (one of
+    OBJECTIVES; see the module docstring)."""
     if not rows:
         raise ValueError('objective: no flight to score')
+    if statistic not in OBJECTIVES:
+        raise ParameterError(f'--objective: {statistic!r} is not one of {", ".join(OBJECTIVES)}')
     rmse = [r['rmse_position_m'] if r['finished'] else max_error_m for r in rows]
     finished = sum(1 for r in rows if r['finished'])
-    median = float(np.median(rmse))
+    median, p95 = (float(v) for v in np.percentile(rmse, [50.0, 95.0]))
     share = finished / len(rows)
-    value = median if share >= REQUIRED_FINISHED_SHARE else max_error_m * (2.0 - share)
-    return Score(value, median, finished, len(rows))
+    value = (median if statistic == 'median' else p95) if share >= REQUIRED_FINISHED_SHARE else \
+        max_error_m * (2.0 - share)
+    return Score(value, median, p95, finished, len(rows))
+
+
+def pick_value(attrs: dict, statistic: str, max_error_m: float) -> float:
+    """A finished trial's objective by ``statistic`` from what it recorded (its user attributes): the statistic
+    if it finished 99 % of its flights, else the penalty of :func:`objective`; nan if it did not record it."""
+    recorded = attrs.get(f'{statistic}_rmse_m', math.nan)
+    flights = attrs.get('flights') or 0
+    if not flights or math.isnan(recorded):
+        return math.nan
+    share = attrs['finished'] / flights
+    return recorded if share >= REQUIRED_FINISHED_SHARE else max_error_m * (2.0 - share)
 
 
 def cannot_reach_required_share(failed: int, total_flights: int) -> bool:
@@ -90,19 +113,24 @@ class TuneSetup:
     out_dir: Path
     options: RunOptions            #: workers, scheduler, batch size, vehicle file; gains_file: the starting gains
     sampler_seed: int = 0
+    objective: str = 'median'      #: the statistic minimised (OBJECTIVES)
 
     def __post_init__(self):
         seed = self.sampler_seed
         if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SAMPLER_SEED:
             raise ParameterError(f'--sampler-seed: {seed!r} is outside the valid range [0, {MAX_SAMPLER_SEED}] '
                                  '(a whole number)')
+        if self.objective not in OBJECTIVES:
+            raise ParameterError(f'--objective: {self.objective!r} is not one of {", ".join(OBJECTIVES)}')
         if self.out_dir.exists() and not self.out_dir.is_dir():
             raise ParameterError(f'--out: {self.out_dir} exists and is not a folder; choose another --out')
 
     def identity(self) -> dict:
         """What makes two runs the same study (kept in the study; a resume must match it)."""
-        return {'kind': self.kind, 'spec': self.spec.to_mapping(), 'seeds': list(self.seeds),
-                'vehicle_file': self.options.vehicle_file, 'starting_gains': _digest(self.starting_gains())}
+        identity = {'kind': self.kind, 'spec': self.spec.to_mapping(), 'seeds': list(self.seeds),
+                    'vehicle_file': self.options.vehicle_file, 'starting_gains': _digest(self.starting_gains())}
+        # the median's studies were made before there was a choice: their identity stays what it was
+        return identity if self.objective == 'median' else {**identity, 'objective': self.objective}
 
     def starting_gains(self) -> dict:
         return load_gains(self.options.gains_file, kind=self.kind)
@@ -203,7 +231,7 @@ def fly_point(setup: TuneSetup, values: dict, after_seed=None, label: str | None
         run_campaign(replace(setup.spec, seed=seed), campaign_dir,
                      replace(options, resume=holds_campaign(campaign_dir), progress_label=f'{label} seed {seed}'))
         rows += read_flights(campaign_dir / FLIGHTS_FILE)
-        score = objective(rows, setup.spec.max_error_m)
+        score = objective(rows, setup.spec.max_error_m, setup.objective)
         if after_seed is not None:
             after_seed(index, score, rows)
     return score
@@ -255,6 +283,7 @@ def make_objective(setup: TuneSetup, say=None):
 
 def _record(trial, score: Score) -> None:
     trial.set_user_attr('median_rmse_m', score.median_rmse_m)
+    trial.set_user_attr('p95_rmse_m', score.p95_rmse_m)
     trial.set_user_attr('finished', score.finished)
     trial.set_user_attr('flights', score.flights)
     trial.set_user_attr('objective_m', score.objective_m)
@@ -271,6 +300,7 @@ def trials_table(study, kind: str) -> list[dict]:
             'starting_gains': bool(attrs.get('starting_gains')),
             'objective_m': trial.value if trial.value is not None else attrs.get('objective_m', math.nan),
             'median_rmse_m': attrs.get('median_rmse_m', math.nan),
+            'p95_rmse_m': attrs.get('p95_rmse_m', math.nan),
             'finished': attrs.get('finished', ''), 'flights': attrs.get('flights', ''),
             'seeds_flown': attrs.get('seeds_flown', 0),
             'pruned_because': attrs.get('pruned_because', '') or attrs.get('refused', ''),
@@ -290,21 +320,39 @@ def write_trials_table(study, setup: TuneSetup) -> Path:
     return path
 
 
-def write_gains(study, setup: TuneSetup) -> Path:
-    """``DIR/gains-KIND.yaml``: the starting gains with the best trial's point, as a ROS 2 parameter file
-    (what ``--gains`` and the controller node's ``--params-file`` read), its provenance in the header."""
-    best = study.best_trial
+def picks(study, setup: TuneSetup) -> dict[str, object]:
+    """{statistic: the finished trial, flown on every seed, with the smallest :func:`pick_value` by it} for each
+    statistic of OBJECTIVES that some such trial recorded."""
+    optuna = _optuna()
+    whole = [t for t in study.get_trials(deepcopy=False, states=(optuna.trial.TrialState.COMPLETE,))
+             if t.user_attrs.get('seeds_flown') == len(setup.seeds) and 'refused' not in t.user_attrs]
+    chosen = {}
+    for statistic in OBJECTIVES:
+        scored = [(pick_value(t.user_attrs, statistic, setup.spec.max_error_m), t.number, t) for t in whole]
+        scored = [entry for entry in scored if not math.isnan(entry[0])]
+        if scored:
+            chosen[statistic] = min(scored, key=lambda entry: entry[:2])[2]
+    return chosen
+
+
+def write_gains(study, setup: TuneSetup, trial=None, suffix: str = '') -> Path:
+    """``DIR/gains-KIND{suffix}.yaml``: the starting gains with ``trial``'s point (default: the study's best), as
+    a ROS 2 parameter file (what ``--gains`` and the controller node's ``--params-file`` read), its provenance in
+    the header."""
+    best = study.best_trial if trial is None else trial
     gains = with_values(setup.starting_gains(), setup.kind, best.params)
     attrs = best.user_attrs
+    p95 = f', p95 {attrs["p95_rmse_m"] * 100:.3f} cm' if 'p95_rmse_m' in attrs else ''
     lines = [f'# Tuned by run_stack.py tune for {setup.kind} (docs/TUNING.md): trial {best.number} of '
-             f'{len(study.trials)}, objective {best.value * 100:.3f} cm',
-             f'# (median RMSE {attrs["median_rmse_m"] * 100:.3f} cm, {attrs["finished"]}/{attrs["flights"]} '
+             f'{len(study.trials)}, objective ({setup.objective}) {best.value * 100:.3f} cm'
+             + (f'; the pick by {suffix[1:]}' if suffix else ''),
+             f'# (median RMSE {attrs["median_rmse_m"] * 100:.3f} cm{p95}, {attrs["finished"]}/{attrs["flights"]} '
              f'finished) on seeds {",".join(map(str, setup.seeds))} x {setup.spec.flights} flights of '
              f'"{setup.spec.scenario}", {setup.spec.duration:g} s each.',
              '# Searched: ' + ', '.join(f'{d.name} = {best.params[d.name]:.4g} {d.unit.split(" (")[0]}'
                                         for d in search_space(setup.kind))]
     document = {'/**': {'ros__parameters': {'controller': setup.kind, **gains}}}
-    path = setup.out_dir / f'gains-{setup.kind}.yaml'
+    path = setup.out_dir / f'gains-{setup.kind}{suffix}.yaml'
     path.write_text('\n'.join(lines) + '\n' + yaml.safe_dump(document, sort_keys=False))
     return path
 
@@ -326,6 +374,7 @@ class TuneOutcome:
     trials: int
     gains_path: Path
     table_path: Path
+    picks: dict = None      #: {statistic: (trial number, its value [m], gains path)} (:func:`picks`)
 
 
 def tune(setup: TuneSetup, progress: bool = True) -> TuneOutcome:
@@ -366,5 +415,8 @@ def tune(setup: TuneSetup, progress: bool = True) -> TuneOutcome:
                     and t.state == optuna.trial.TrialState.COMPLETE]
         table = write_trials_table(study, setup)
         gains = write_gains(study, setup)
+        chosen = {statistic: (trial.number, pick_value(trial.user_attrs, statistic, setup.spec.max_error_m),
+                              write_gains(study, setup, trial, f'-{statistic}'))
+                  for statistic, trial in picks(study, setup).items()}
     return TuneOutcome(study.best_trial.number, study.best_value, starting[0].value if starting else math.nan,
-                       len(study.trials), gains, table)
+                       len(study.trials), gains, table, chosen)
