@@ -67,6 +67,30 @@ def test_l1_estimate_of_a_constant_force_converges_as_its_bandwidths_predict():
     assert 0.0 < r < 1.0 and 1.0 - r < 0.01
 
 
+@pytest.mark.parametrize('second_hz', [0.0, 0.5])
+def test_l1_rotational_compensation_is_its_estimate_through_one_or_two_cascaded_low_passes(second_hz):
+    """With ``cutoff_rotation_second_hz`` 0, c_2..c_4 is sigma_w through C(s) = w_1 / (s + w_1); above 0, through
+    a second stage w_2 / (s + w_2) cascaded after it, each discretised exactly (b = 1 - exp(-w T_s)): recomputed
+    here from the estimates the controller reports, step by step, while body rates it did not command move."""
+    gains = copy.deepcopy(GAINS)
+    gains['l1_se3'].update(cutoff_rotation_hz=8.0, cutoff_rotation_second_hz=second_hz)
+    controller = build_controller('l1-se3', VEHICLE, gains)
+    b1, b2 = (-math.expm1(-2.0 * math.pi * hz * DT) for hz in (8.0, second_hz))
+    stage, expected = np.zeros(3), np.zeros(3)
+    for k in range(400):
+        state = list(HOVER)
+        state[9:12] = [0.3 * math.sin(0.02 * k), -0.2 * math.cos(0.03 * k), 0.1 * math.sin(0.05 * k)]
+        controller.update(k * DT, state, hold((0.0, 0.0, 1.0)))
+        sigma_w = controller.estimate[3:6]
+        if second_hz:
+            stage += b1 * (sigma_w - stage)
+            expected += b2 * (stage - expected)
+        else:
+            expected += b1 * (sigma_w - expected)
+        assert controller.compensation[1:] == pytest.approx(expected, rel=1e-12, abs=1e-12), k
+    assert np.abs(expected).max() > 0.1      # the estimate moved: the filters had something to filter
+
+
 def test_l1_on_the_ground_estimates_nothing():
     """The ground's reaction is not an uncertainty to compensate: below takeoff_height the estimate stays 0."""
     controller = build_controller('l1-se3', VEHICLE, GAINS)
@@ -304,6 +328,7 @@ def held_state(controller) -> np.ndarray:
 @pytest.mark.parametrize('kind, section, key, value', [
     ('l1-se3', 'l1_se3', 'predictor_pole_translation', 0.0),
     ('l1-se3', 'l1_se3', 'cutoff_rotation_hz', -1.0),
+    ('l1-se3', 'l1_se3', 'cutoff_rotation_second_hz', -1.0),
     ('l1-se3', 'l1_se3', 'estimate_limit_translation', math.inf),
     ('indi', 'indi', 'rate_filter_hz', 0.0),
     ('indi', 'indi', 'effectiveness_rate', 2.0),

@@ -399,5 +399,13 @@ def test_every_search_space_is_a_controller_kind():
     from nnit2fsmc_controller.factory import CONTROLLERS
     assert set(SEARCH_SPACES) <= set(CONTROLLERS)
     assert {'nnit2fsmc', 'pid', 'se3', 'smc-integral'} <= set(SEARCH_SPACES)
-    # the same budget: every kind searches the same number of dimensions
-    assert len({len(space) for space in SEARCH_SPACES.values()}) == 1
+    # equal effort is the same trials, seeds and flights (issue 37), with every gain a kind has in its space: the
+    # PID-shaped position loops whole (x, y and z: error, integral, rate), l1-se3's L1 loop whole (both channels'
+    # pole and low-pass, the rotational cascade's second stage)
+    def keys(kind):
+        return {gain for dimension in SEARCH_SPACES[kind] for gain in dimension.gains}
+    for kind, section, gains in (('pid', 'pid', ('kp', 'ki', 'kd')), ('se3', 'se3', ('k_error', 'k_integral', 'k_rate')),
+                                 ('l1-se3', 'l1_se3', ('k_error', 'k_integral', 'k_rate'))):
+        assert {f'{section}.axes.{axis}.{gain}' for axis in 'xyz' for gain in gains} <= keys(kind), kind
+    assert {f'l1_se3.{key}' for key in ('predictor_pole_translation', 'predictor_pole_rotation', 'cutoff_translation_hz',
+                                        'cutoff_rotation_hz', 'cutoff_rotation_second_hz')} <= keys('l1-se3')

@@ -512,6 +512,7 @@ GAIN_DESCRIPTIONS = {
     'predictor_pole_rotation': 'l1-se3: pole a_w of the body-rate predictor, A_s = -a_w I [1/s]',
     'cutoff_translation_hz': 'l1-se3: cutoff of the low-pass C(s) of the thrust-axis compensation [Hz] (0: none)',
     'cutoff_rotation_hz': 'l1-se3: cutoff of the low-pass C(s) of the angular-acceleration compensation [Hz] (0: none)',
+    'cutoff_rotation_second_hz': 'l1-se3: cutoff of a second low-pass cascaded after it [Hz] (0: one stage)',
     'estimate_limit_translation': 'l1-se3: bound on each component of the acceleration estimate sigma_v [m/s^2]',
     'estimate_limit_rotation': 'l1-se3: bound on each component of the angular-acceleration estimate sigma_w [rad/s^2]',
     'rate_filter_hz': 'indi: cutoff of the low-pass of the body rates and of the modelled moment [Hz]',

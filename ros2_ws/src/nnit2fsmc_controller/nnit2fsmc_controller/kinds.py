@@ -27,7 +27,7 @@ ABLATIONS = {
 }
 #: the keys of the l1_se3 and indi sections (beside their axes), read as numbers
 L1_KEYS = ('predictor_pole_translation', 'predictor_pole_rotation', 'cutoff_translation_hz', 'cutoff_rotation_hz',
-           'estimate_limit_translation', 'estimate_limit_rotation')
+           'cutoff_rotation_second_hz', 'estimate_limit_translation', 'estimate_limit_rotation')
 INDI_KEYS = ('rate_filter_hz', 'acceleration_filter_hz', 'motor_time_constant', 'effectiveness_rate',
              'effectiveness_threshold', 'effectiveness_min', 'effectiveness_max')
 

@@ -34,6 +34,12 @@ omega_c / (s + omega_c) discretised exactly (b = 1 - exp(-omega_c T_s)):
 
     c(k) = c(k-1) + b (sigma_m(k) - c(k-1)),     U1 = U1_b - m c_1,   M = M_b - J (c_2, c_3, c_4)
 
+The rotational channel may cascade a second low-pass, as L1Quad-style implementations do for the moment
+(``cutoff_rotation_second_hz`` > 0; 0: one stage): C_w(s) = omega_1 / (s + omega_1) * omega_2 / (s + omega_2),
+each stage discretised as above (b_1, b_2):
+
+    r(k) = r(k-1) + b_1 (sigma_w(k) - r(k-1)),   (c_2, c_3, c_4)(k) = c(k-1) + b_2 (r(k) - c(k-1))
+
 Convergence (what tests/test_adaptive_baselines.py checks): on a plant that integrates exactly
 v(k+1) = v(k) + T_s (f(k) + d) with a constant unknown d, the error after one step is
 z-hat - z = (Phi - T_s) f - T_s d, so from the second step on sigma-hat = (mu T_s / Phi) d +
@@ -75,11 +81,12 @@ def memory_slots(layout) -> tuple[dict[str, int], int]:
 
 #: the slots of one vehicle's L1 memory, in order, and their sizes
 MEMORY = (('v_hat', 3), ('omega_hat', 3), ('sigma', 6), ('compensation', 4), ('velocity', 3), ('omega', 3),
-          ('thrust_axis', 3), ('thrust_per_mass', 1), ('moment', 3), ('started', 1))
+          ('thrust_axis', 3), ('thrust_per_mass', 1), ('moment', 3), ('moment_stage', 3), ('started', 1))
 SLOT, MEMORY_SIZE = memory_slots(MEMORY)
 V_HAT, OMEGA_HAT, SIGMA, COMPENSATION = SLOT['v_hat'], SLOT['omega_hat'], SLOT['sigma'], SLOT['compensation']
 VELOCITY, OMEGA, AXIS, THRUST, MOMENT, STARTED = (SLOT['velocity'], SLOT['omega'], SLOT['thrust_axis'],
                                                   SLOT['thrust_per_mass'], SLOT['moment'], SLOT['started'])
+STAGE = SLOT['moment_stage']   #: r, the first stage of a cascaded rotational filter [rad/s^2, body]
 
 
 @njit(cache=True)
@@ -90,8 +97,8 @@ def l1_vehicle(memory, measured, held, constants):
 
     ``measured``: v (3) [m/s, world], Omega (3) [rad/s, body], R e3 (3) now; ``held``: the take-off hold
     (everything back to zero, the predictor to the measurement). ``constants``: (mu_v, Phi_v, mu_w, Phi_w,
-    b_v, b_w, g, limit_v, limit_w, Ix, Iy, Iz)."""
-    mu_v, phi_v, mu_w, phi_w, b_v, b_w, g, limit_v, limit_w, ix, iy, iz = constants
+    b_v, b_w, g, limit_v, limit_w, Ix, Iy, Iz, b_w2) with b_w2 = 0 for one rotational stage."""
+    mu_v, phi_v, mu_w, phi_w, b_v, b_w, g, limit_v, limit_w, ix, iy, iz, b_w2 = constants
     if memory[STARTED] > 0.0 and not held:
         v, w, e3 = memory[VELOCITY:VELOCITY + 3], memory[OMEGA:OMEGA + 3], memory[AXIS:AXIS + 3]
         f = memory[THRUST]
@@ -113,13 +120,18 @@ def l1_vehicle(memory, measured, held, constants):
         matched = (memory[SIGMA] * measured[6] + memory[SIGMA + 1] * measured[7] + memory[SIGMA + 2] * measured[8])
         memory[COMPENSATION] += b_v * (matched - memory[COMPENSATION])
         for i in range(3):
-            memory[COMPENSATION + 1 + i] += b_w * (memory[SIGMA + 3 + i] - memory[COMPENSATION + 1 + i])
+            if b_w2 > 0.0:
+                memory[STAGE + i] += b_w * (memory[SIGMA + 3 + i] - memory[STAGE + i])
+                memory[COMPENSATION + 1 + i] += b_w2 * (memory[STAGE + i] - memory[COMPENSATION + 1 + i])
+            else:
+                memory[COMPENSATION + 1 + i] += b_w * (memory[SIGMA + 3 + i] - memory[COMPENSATION + 1 + i])
     else:
         for i in range(3):
             memory[V_HAT + i] = measured[i]
             memory[OMEGA_HAT + i] = measured[3 + i]
         memory[SIGMA:SIGMA + 6] = 0.0
         memory[COMPENSATION:COMPENSATION + 4] = 0.0
+        memory[STAGE:STAGE + 3] = 0.0
     memory[VELOCITY:VELOCITY + 3] = measured[0:3]
     memory[OMEGA:OMEGA + 3] = measured[3:6]
     memory[AXIS:AXIS + 3] = measured[6:9]
@@ -155,7 +167,8 @@ class L1SE3Controller(SE3Controller):
     """The ``se3`` law plus the L1 adaptive augmentation of the module docstring.
 
     ``l1``: predictor poles a_v, a_w [1/s] (``predictor_pole_translation``, ``predictor_pole_rotation``),
-    filter cutoffs [Hz] (``cutoff_translation_hz``, ``cutoff_rotation_hz``), estimate bounds
+    filter cutoffs [Hz] (``cutoff_translation_hz``, ``cutoff_rotation_hz`` and the cascaded rotational
+    stage's ``cutoff_rotation_second_hz``, 0: none), estimate bounds
     [m/s^2], [rad/s^2] (``estimate_limit_translation``, ``estimate_limit_rotation``).
     """
 
@@ -170,12 +183,13 @@ class L1SE3Controller(SE3Controller):
                               low_inclusive=False)
         cutoff_v = check_number('l1_se3.cutoff_translation_hz', l1['cutoff_translation_hz'], 0.0)
         cutoff_w = check_number('l1_se3.cutoff_rotation_hz', l1['cutoff_rotation_hz'], 0.0)
+        cutoff_w2 = check_number('l1_se3.cutoff_rotation_second_hz', l1['cutoff_rotation_second_hz'], 0.0)
         limit_v = check_number('l1_se3.estimate_limit_translation', l1['estimate_limit_translation'], 0.0)
         limit_w = check_number('l1_se3.estimate_limit_rotation', l1['estimate_limit_rotation'], 0.0)
         p = params
         self.constants = (*discrete_pole(pole_v, self.dt), *discrete_pole(pole_w, self.dt),
                           filter_blend(cutoff_v, self.dt), filter_blend(cutoff_w, self.dt), float(p.g),
-                          limit_v, limit_w, float(p.Ix), float(p.Iy), float(p.Iz))
+                          limit_v, limit_w, float(p.Ix), float(p.Iy), float(p.Iz), filter_blend(cutoff_w2, self.dt))
         #: one row per vehicle (MEMORY); a single vehicle is a batch of one
         self.memory = np.zeros((1 if self.batch is None else self.batch, MEMORY_SIZE))
 

@@ -77,17 +77,20 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
         _z('smc_integral', 'integral_gain', 0.2, 50.0, '1/s^2'),
         _z('smc_integral', 'switching_gain', 0.5, 20.0, 'm/s^2'),
     ),
-    'l1-se3': (    # its own se3 law (l1_se3.axes, apart from se3's): x, y error, integral, rate and z error; its L1 loop
-        *_position_loop('l1_se3', 'k_error', 'k_integral', 'k_rate')[:4],
+    'l1-se3': (    # its own se3 law (l1_se3.axes, apart from se3's): its whole position loop; then its L1 loop, both
+        # channels (predictor pole and low-pass), and the rotational channel's cascaded second low-pass (0: none)
+        *_position_loop('l1_se3', 'k_error', 'k_integral', 'k_rate'),
         Dimension('l1.predictor_pole_translation', ('l1_se3.predictor_pole_translation',), 0.5, 50.0, '1/s'),
         Dimension('l1.cutoff_translation_hz', ('l1_se3.cutoff_translation_hz',), 0.5, 50.0, 'Hz'),
+        Dimension('l1.predictor_pole_rotation', ('l1_se3.predictor_pole_rotation',), 0.5, 50.0, '1/s'),
+        Dimension('l1.cutoff_rotation_hz', ('l1_se3.cutoff_rotation_hz',), 0.5, 50.0, 'Hz'),
+        Dimension('l1.cutoff_rotation_second_hz', ('l1_se3.cutoff_rotation_second_hz',), 0.0, 10.0, 'Hz', log=False),
     ),
     'indi': (
         *_position_loop('indi', 'k_error', None, 'k_rate'),
         Dimension('indi.effectiveness_rate', ('indi.effectiveness_rate',), 0.005, 0.5, '- (normalised LMS step)'),
-        # its modelled rotor response, in place of its acceleration filter's cutoff (every kind searches six
-        # dimensions): the example campaign's 30 ms motor lag with 4 ms of delay crashes every flight of the
-        # packaged 0 s (docs/ADAPTIVE_BASELINES.md), so tuning must be able to find it
+        # its modelled rotor response: the example campaign's 30 ms motor lag with 4 ms of delay crashes every
+        # flight of the packaged 0 s (docs/ADAPTIVE_BASELINES.md), so tuning must be able to find it
         Dimension('indi.motor_time_constant', ('indi.motor_time_constant',), 0.0, 0.06, 's', log=False),
     ),
 }
