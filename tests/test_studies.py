@@ -44,3 +44,11 @@ def test_every_study_has_its_options_and_an_out_folder(name):
     shown = study(name, *FLYING.get(name, []), '--help')
     assert shown.returncode == 0, shown.stderr
     assert f'run_stack.py study {name}' in shown.stdout and '--out DIR' in shown.stdout
+
+
+def test_indi_lag_cells_take_the_true_lag_or_a_factor_and_count_failures_as_the_largest_error():
+    from flight_stack.studies.indi_lag import assumed, cell
+    assert assumed('true', 0.0153, 0.045) == 0.045 and assumed('2', 0.0153, 0.045) == pytest.approx(0.0306)
+    flights = [{'finished': True, 'rmse_position_m': 0.01}] * 18 + [{'finished': False, 'rmse_position_m': 0.02}] * 2
+    # p50 of eighteen 1 cm and two failures (1 m each) is 1 cm; p95 lies between the 19th and 20th value: 1 m
+    assert cell(flights, 1.0) == '18/20: 1.00 / 100.00'
