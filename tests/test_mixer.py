@@ -241,17 +241,25 @@ def test_airmode_keeps_the_moments_when_the_thrust_asks_for_less_than_they_need(
 
 @pytest.mark.parametrize('layout', LAYOUTS)
 def test_airmode_allocation_properties_in_every_layout(layout):
-    """For any demand, in every layout: rotor limits hold; (U2, U3) is the demand times one factor in [0, 1], 1 when
-    the pair torques fit in one rotor's range; U4 has the demand's sign and at most its size; U1 is the demand
-    clipped to what the realised moments leave (so a demand that fits is realised exactly)."""
+    """For any demand, in every layout: rotor limits hold. When U1 asks for less than the moments need (its mean
+    below F_MIN less the lowest differential part of the moments as asked): (U2, U3) is the demand times one factor
+    in [0, 1], 1 when the pair torques fit in one rotor's range; U4 has the demand's sign and at most its size; U1
+    is the demand raised to the least the realised moments need, below it only where they take a rotor's whole
+    range. Otherwise it is the thrust-first allocation, so a demand that fits is realised exactly."""
     params = LAYOUTS[layout]
     mixer = params.mixer
     rng = np.random.default_rng(37)
+    raised = 0
     for _ in range(300):
         demand = (rng.uniform(-2.0, 13.0), *rng.normal(0.0, 1.5, 2), rng.normal(0.0, 0.03))
         forces = allocate('airmode', *demand, mixer, F_MIN, F_MAX)
-        u1, u2, u3, u4 = controls_from_forces(*forces, mixer)
         assert all(F_MIN - 1e-12 <= f <= F_MAX + 1e-12 for f in forces)
+        asked = [f - demand[0] / 4 for f in forces_from_controls(*demand, mixer)]   # the differential parts asked
+        if demand[0] / 4 >= F_MIN - min(asked):
+            assert forces == priority_allocation(*demand, mixer, F_MIN, F_MAX)
+            continue
+        raised += 1
+        u1, u2, u3, u4 = controls_from_forces(*forces, mixer)
         factor = u2 / demand[1]
         assert -1e-12 <= factor <= 1 + 1e-12 and u3 == pytest.approx(factor * demand[2], abs=1e-12)
         t13, t24 = (abs(t) for t in pair_torques(demand[1], demand[2], mixer))
@@ -259,8 +267,17 @@ def test_airmode_allocation_properties_in_every_layout(layout):
             assert factor == pytest.approx(1.0, abs=1e-12)
         assert u4 * demand[3] >= -1e-15 and abs(u4) <= abs(demand[3]) + 1e-15
         differential = [f - u1 / 4 for f in forces]
-        allowed = (4 * (F_MIN - min(differential)), 4 * (F_MAX - max(differential)))
-        assert u1 == pytest.approx(min(max(demand[0], allowed[0]), allowed[1]), abs=1e-12)
-        exact = forces_from_controls(*demand, mixer)
-        if all(F_MIN <= f <= F_MAX for f in exact):
-            np.testing.assert_allclose(forces, exact, atol=1e-14)
+        if u1 < demand[0] - 1e-12:    # lowered only where the moments take a rotor's whole range
+            assert max(differential) - min(differential) == pytest.approx(F_MAX - F_MIN, abs=1e-12)
+        assert u1 == pytest.approx(min(max(demand[0], 4 * (F_MIN - min(differential))),
+                                       4 * (F_MAX - max(differential))), abs=1e-12)
+    assert 30 <= raised <= 270      # both branches drawn
+
+
+def test_airmode_gives_a_heavy_climb_its_thrust_as_thrust_first_does():
+    """At the top (the collective asked near the rotors' maximum, moments that do not fit above it) airmode is the
+    thrust-first allocation: U1 kept, the moments scaled; it never lowers the thrust for a moment."""
+    demand = (4 * F_MAX - 0.05, 0.4, -0.3, 0.001)
+    forces = allocate('airmode', *demand, MIXER, F_MIN, F_MAX)
+    assert forces == priority_allocation(*demand, MIXER, F_MIN, F_MAX)
+    assert controls_from_forces(*forces, MIXER)[0] == pytest.approx(demand[0], abs=1e-12)

@@ -7,8 +7,9 @@ One law per subsystem (x, y, z, phi, theta, psi; :mod:`.axis_laws`) inside one s
 2. Desired roll and pitch (eq. 10 as it is meant, see below) from v_x, v_y and the measured yaw.
 3. Attitude loop: the phi, theta, psi laws give U2 [N], U3 [N], U4 [N m] (eq. 1 and 2 units).
 4. Rotor thrusts by the inverse of eq. (2) within the rotor limits: by thrust-priority allocation
-   (U1 first, then U2 and U3, U4 last; ``allocation='priority'``), by airmode allocation (U2 and U3
-   first, then U4, U1 last: attitude authority kept; ``'airmode'``) or by clipping each rotor
+   (U1 first, then U2 and U3, U4 last; ``allocation='priority'``), by airmode allocation (above the take-off
+   height, when U1 is too low for the moments: U2 and U3 first, then U4, U1 raised to what they need; otherwise
+   thrust first; ``'airmode'``) or by clipping each rotor
    (``'clip'``, paper-faithful); :func:`quad_msgs_bridge.mixer.allocate`.
 
 Eq. (10) as printed, phi_d = U_eq_psi + U_fuzzy and theta_d = U_eq_phi + U_fuzzy, names the wrong
@@ -371,7 +372,7 @@ def cascade_step(store, law_constants, c, mixer, inputs):
     out_psi = _law(5, store, law_constants, c, wrap_angle(psi - psi_d), dpsi - yaw_rate, yaw_rate, yaw_acceleration,
                    (dphi * dtheta * (ix - iy) - c[_KFPSI] * (dpsi * abs(dpsi))) / iz, 1.0 / iz)
     forces = allocate_by_index(int(c[_ALLOCATION]), out_z[0], out_phi[0], out_theta[0], out_psi[0], mixer, c[_F_MIN],
-                               c[_F_MAX])
+                               c[_F_MAX], not (c[_TAKEOFF] > 0.0 and z <= c[_TAKEOFF]))
     controls = controls_from_forces(forces[0], forces[1], forces[2], forces[3], mixer)
     return forces, controls, (out_x, out_y, out_z, out_phi, out_theta, out_psi), (phi_d, theta_d, psi_d)
 
@@ -502,7 +503,7 @@ class CascadedController:
                                      1.0 / p.Iz)
 
         forces = allocate(self.allocation, out_z.value, out_phi.value, out_theta.value, out_psi.value,
-                          p.mixer, p.F_min, p.F_max)
+                          p.mixer, p.F_min, p.F_max, airborne=(z > self.takeoff_height) | (self.takeoff_height <= 0.0))
         return finite_output(ControlOutput(
             forces=forces,
             controls=controls_from_forces(*forces, p.mixer),

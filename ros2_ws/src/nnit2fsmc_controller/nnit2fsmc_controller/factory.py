@@ -466,8 +466,9 @@ GAIN_DESCRIPTIONS = {
     'low_altitude_height': 'height [m, ground at z = 0] below which the tilt limit is low_altitude_max_tilt '
                            '(0: max_tilt at every height)',
     'angle_filter_tau': 'time constant of the desired-angle differentiation filter [s]',
-    'allocation': 'rotor limits: priority (U1 kept, then roll/pitch scaled to fit, yaw last), airmode (roll/pitch '
-                  'kept, then yaw, U1 raised or lowered to what they leave: attitude authority at any thrust) or clip '
+    'allocation': 'rotor limits: priority (U1 kept, then roll/pitch scaled to fit, yaw last), airmode (airborne, '
+                  'at a U1 too low for the moments: roll/pitch kept, then yaw, U1 raised to what they need; else '
+                  'priority) or clip '
                   '(each rotor clipped, paper-faithful)',
     'attitude_rates': 'desired roll/pitch rates: flatness (from the reference jerk and snap) or filter (paper)',
     'measurement_filter_hz': 'crossover of the complementary filter of measured position and angles [Hz], the '

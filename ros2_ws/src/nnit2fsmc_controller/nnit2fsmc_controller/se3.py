@@ -51,6 +51,8 @@ from __future__ import annotations
 
 from typing import Sequence
 
+import numpy as np
+
 from quad_msgs_bridge.frames import body_rates_from_euler_rates, rotation_from_euler
 from quad_msgs_bridge.mixer import allocate, controls_from_forces
 from quad_msgs_bridge.numeric import namespace_for
@@ -263,7 +265,7 @@ class SE3Controller:
         u2, u3, u4 = (m / s for m, s in zip(moment, scale))
         thrust, (u2, u3, u4) = self.compensated(state, rotation, thrust, (u2, u3, u4), held)
 
-        forces = allocate(self.allocation, thrust, u2, u3, u4, p.mixer, p.F_min, p.F_max)
+        forces = allocate(self.allocation, thrust, u2, u3, u4, p.mixer, p.F_min, p.F_max, airborne=np.logical_not(held))
         controls = controls_from_forces(*forces, p.mixer)
         self.applied(state, controls, held)
         lam = self.lam

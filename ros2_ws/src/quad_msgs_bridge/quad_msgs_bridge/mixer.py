@@ -141,22 +141,33 @@ def priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
 
 @njit(cache=True, error_model='numpy')
 def airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
-    """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m]: roll and pitch first, then yaw, the collective
-    thrust last (airmode: attitude authority is kept whatever U1 asks, even U1 <= 0).
+    """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m]: the moments are kept when the collective thrust
+    asked for is below what they need (airmode at low thrust: attitude authority whatever U1 asks, even U1 <= 0);
+    otherwise :func:`priority_allocation` (U1 kept, the moments scaled to fit).
 
     With the notation of :func:`priority_allocation`, F_i = m + d_i where the differential parts are
     d = (-t13/2 - y, -t24/2 + y, t13/2 - y, t24/2 + y) and W = f_max - f_min is the range of one rotor.
-    The spread of the d_i is max(|t13|, |t24|, (|t13| + |t24|)/2 + 2|y|), so:
+    The spread of the d_i is max(|t13|, |t24|, (|t13| + |t24|)/2 + 2|y|), so, when U1/4 < f_min - min_i d_i
+    for the moments as asked (they do not fit below):
 
     1. U2 and U3 are scaled by s = min(1, W / max(|t13|, |t24|)) (the torque's direction is kept);
     2. the yaw shift is the demanded y clipped to |y| <= (W - s (|t13| + |t24|)/2) / 2 (cut, never reversed);
-    3. the mean thrust is U1/4 clipped to [f_min - min_i d_i, f_max - max_i d_i], an interval that steps 1-2
-       make non-empty: U1 is raised when it is too low for the moments, lowered when too high, else kept.
+    3. the mean thrust is U1/4 raised to f_min - min_i d_i (of the moments of steps 1-2), the least collective that
+       realises them, and bounded by f_max - max_i d_i (below U1/4 only when they take a rotor's whole range W),
+       an interval that steps 1-2 make non-empty.
 
-    A demand that fits is realised exactly (the inverse of eq. 2). Floats or arrays (elementwise, one element
-    per vehicle)."""
+    At the top the thrust comes first, as with ``priority``: an airmode that also lowered the collective to fit
+    the moments kept heavy vehicles from climbing (the NNIT2FSMC finished 44 of 50 example-campaign flights with
+    it, 50 with ``priority``; docs/BASELINES.md). A demand that fits is realised exactly (the inverse of eq. 2).
+    Floats or arrays (elementwise, one element per vehicle)."""
     t13, t24 = pair_torques(u2, u3, mixer)
     yaw = mixer[SPIN] * (0.25 * u4 / mixer[YAW_COEFFICIENT])
+    lowest_asked = np.minimum(np.minimum(-0.5 * t13 - yaw, -0.5 * t24 + yaw),
+                              np.minimum(0.5 * t13 - yaw, 0.5 * t24 + yaw))
+    thrust_first = priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
+    below = 0.25 * u1 < f_min - lowest_asked
+    if not np.any(below):
+        return thrust_first
     span = f_max - f_min
     pitch, roll = np.abs(t13), np.abs(t24)
     scale = _most(span, np.maximum(pitch, roll))
@@ -166,25 +177,36 @@ def airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
     d = (-half13 - shift, -half24 + shift, half13 - shift, half24 + shift)
     lowest = np.minimum(np.minimum(d[0], d[1]), np.minimum(d[2], d[3]))
     highest = np.maximum(np.maximum(d[0], d[1]), np.maximum(d[2], d[3]))
-    mean = clipped(0.25 * u1, f_min - lowest, f_max - highest)
-    return saturated((mean + d[0], mean + d[1], mean + d[2], mean + d[3]), f_min, f_max)   # rounding only
+    mean = clipped(np.maximum(0.25 * u1, f_min - lowest), f_min - lowest, f_max - highest)
+    kept = saturated((mean + d[0], mean + d[1], mean + d[2], mean + d[3]), f_min, f_max)   # rounding only
+    return (select(below, kept[0], thrust_first[0]), select(below, kept[1], thrust_first[1]),
+            select(below, kept[2], thrust_first[2]), select(below, kept[3], thrust_first[3]))
 
 
 @njit(cache=True, error_model='numpy')
-def allocate_by_index(index, u1, u2, u3, u4, mixer, f_min, f_max):
-    """:func:`allocate` for the allocation ALLOCATIONS[index] (what a compiled kernel holds)."""
-    if index == 0:
+def allocate_by_index(index, u1, u2, u3, u4, mixer, f_min, f_max, airborne=True):
+    """:func:`allocate` for the allocation ALLOCATIONS[index] (what a compiled kernel holds), of one vehicle."""
+    if index == 0 or (index == 2 and not airborne):
         return priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
     if index == 1:
         return clip_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
     return airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
 
 
-def allocate(allocation, u1, u2, u3, u4, mixer, f_min, f_max):
+def allocate(allocation, u1, u2, u3, u4, mixer, f_min, f_max, airborne=True):
     """Rotor thrusts [N] for U1..U4 by ``allocation``: 'priority' (:func:`priority_allocation`), 'clip'
     (:func:`clip_allocation`) or 'airmode' (:func:`airmode_allocation`), in the layout ``mixer``
-    (``VehicleParams.mixer``)."""
+    (``VehicleParams.mixer``). Airmode acts only where ``airborne`` (a bool, or one per vehicle): on the ground
+    and lifting off it is 'priority', since moments realised against the ground tip the vehicle as it lifts off
+    (with airmode everywhere the NNIT2FSMC crashed 2 of 50 example flights with a slow motor, rolling +-20 degrees
+    in its first second)."""
     if allocation not in ALLOCATIONS:
         raise ValueError(f'allocation {allocation!r} is not one of {", ".join(ALLOCATIONS)}')
+    if allocation == 'airmode' and not np.all(airborne):
+        thrust_first = priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
+        if not np.any(airborne):
+            return thrust_first
+        kept = airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
+        return tuple(select(airborne, a, b) for a, b in zip(kept, thrust_first))
     return (priority_allocation, clip_allocation, airmode_allocation)[ALLOCATIONS.index(allocation)](
         u1, u2, u3, u4, mixer, f_min, f_max)
