@@ -55,10 +55,6 @@ ADDED_COLUMNS = ('motor_time_constant_s', 'delay_s')
 CHANGED_ON_PURPOSE = {
     'fly/se3/': 'issue 37: common.attitude_rates reaches se3 (the packaged flatness; before, it always filtered)',
     'fly/l1-se3/': 'issue 37: common.attitude_rates reaches l1-se3 (as se3)',
-    # issue 37: the direction of indi's desired force keeps a vertical part of 0.5 m g (se3.MIN_LIFT, was 0.1): the
-    # scenarios with hard vertical braking change, the paper helix does not
-    **{f'fly/indi/{scenario}': 'issue 37: se3.MIN_LIFT 0.5'
-       for scenario in ('circle-fast', 'hover', 'lemniscate', 'steps', 'waypoints')},
 }
 #: the source folders of the repository (pyproject's pytest pythonpath)
 SOURCE_DIRS = ('.', 'ros2_ws/src/quad_msgs_bridge', 'ros2_ws/src/quad_sim', 'ros2_ws/src/nnit2fsmc_controller')

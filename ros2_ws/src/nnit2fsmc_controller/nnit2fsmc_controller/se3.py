@@ -9,7 +9,7 @@ e_x = x - x_d, e_v = v - v_d [m, m/s, world], I_x = int(e_x) dt (clamped) and ma
 
     F_d   = m (-k_x e_x - k_v e_v - k_i I_x + g e3 + xdd_d)                          [N, world]
     f     = F_d . R e3                                                                 (U1 [N])
-    b3_d  = F_d / |F_d|  (horizontal part limited to the tilt limit at the height z, TiltLimit; vertical part >= 0.5 m g)
+    b3_d  = F_d / |F_d|  (horizontal part limited to the tilt limit at the height z, TiltLimit; vertical part >= 0.1 m g)
     R_d   = Rz(psi_d) Ry(theta_d) Rx(phi_d) with R_d e3 = b3_d and the reference heading psi_d
     e_R   = 1/2 vee(R_d^T R - R^T R_d),   e_W = Omega - R^T R_d Omega_d,   I_R = int(e_R) dt (clamped)
     M     = -J (k_R e_R + k_W e_W + k_I I_R) + Omega x J Omega
@@ -64,12 +64,8 @@ from .axis_laws import AxisOutput
 from .controller import (AXES, ATTITUDE_RATES, ControlOutput, RateFilter, TiltLimit, check_allocation, check_inputs,
                          finite_output, flat_attitude_of)
 
-#: minimum vertical part of the desired force's direction b3_d, in units of m g: it keeps b3_d pointing up, and
-#: it keeps a z loop that brakes a climb (asking for little or no thrust) from turning a small horizontal demand
-#: into a large tilt (at 0.1 m g, 0.05 m g sideways was a 27 degree tilt). With airmode allocation, which keeps
-#: the moments at low thrust, se3's three tuning trials that flipped on the take-off step at 0.1 fly it at 0.5
-#: (docs/BASELINES.md). The thrust is still F_d . R e3.
-MIN_LIFT = 0.5
+#: minimum vertical part of the desired force, in units of m g (keeps b3_d pointing up)
+MIN_LIFT = 0.1
 
 
 def _transpose(a):
