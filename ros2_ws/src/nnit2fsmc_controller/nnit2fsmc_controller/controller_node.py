@@ -15,10 +15,11 @@ lambda in effect at each update. Gains that need a restart (and the node paramet
 
 Failure behaviour: odometry that arrives before any setpoint is held and answered when the first
 setpoints arrive, and until every output has matched ``wait_for_recorders`` readers besides the
-simulator (recorders: none of the first answers is lost to them); a repeated odometry (the stamp last answered) is ignored; an older stamp means
-the simulator restarted, and the controller starts afresh (NN weights, filters) and answers it;
-non-finite odometry or setpoints are rejected with a throttled error, and the last valid forces
-(hover thrust if none) are published instead, so a non-finite force is never published.
+simulator (recorders: none of the first answers is lost to them); a repeated odometry (the stamp
+last answered) is ignored; an older stamp means the simulator restarted, and the controller starts
+afresh (NN weights, filters) and answers it; non-finite odometry or setpoints are rejected with a
+throttled error, and the last valid forces (hover thrust if none) are published instead, so a
+non-finite force is never published.
 """
 from __future__ import annotations
 
@@ -108,8 +109,9 @@ class ControllerNode(Node):
                             'the simulator (recorders of every topic); 0: answer at once', (0, 1000),
                             read_only='checked before the first answer')
         #: (publisher, readers it must have matched before the first answer)
-        self.wanted_readers = [(self.forces_pub, recorders + 1)] + [
-            (pub, recorders) for pub in (self.wrench_pub, self.reference_pub, self.diagnostics_pub)] if recorders else []
+        self.wanted_readers = ([(self.forces_pub, recorders + 1)] + [
+            (pub, recorders) for pub in (self.wrench_pub, self.reference_pub, self.diagnostics_pub)]
+            if recorders else [])
         self.match_retry = None     #: a timer that retries the pending odometry while the outputs match
         # the per-step messages go over the wire as CDR bytes made and read by the bridge's fast codecs;
         # in realtime (latest_only) a controller that falls behind skips to the newest odometry

@@ -198,8 +198,8 @@ def allocate(allocation, u1, u2, u3, u4, mixer, f_min, f_max, airborne=True):
     (:func:`clip_allocation`) or 'airmode' (:func:`airmode_allocation`), in the layout ``mixer``
     (``VehicleParams.mixer``). Airmode acts only where ``airborne`` (a bool, or one per vehicle; the controllers
     pass: above ``common.takeoff_height``): on the ground it is 'priority', since moments realised against the
-    ground tip a vehicle as it lifts off (PX4 warns the same of its airmode). This alone did not save the two
-    example flights with a slow motor that airmode loses (docs/BASELINES.md, section 5)."""
+    ground tip a vehicle as it lifts off (PX4 warns the same of its airmode). With it, airmode still finishes fewer
+    flights than 'priority' on the drawn-actuator campaign (docs/BASELINES.md, section 5)."""
     if allocation not in ALLOCATIONS:
         raise ValueError(f'allocation {allocation!r} is not one of {", ".join(ALLOCATIONS)}')
     if allocation == 'airmode' and not np.all(airborne):
