@@ -63,7 +63,8 @@ def tune_main(argv: list[str]) -> int:
     parser.add_argument('--trials', type=int, required=True, help='trials in the study, >= 1 (the budget)')
     parser.add_argument('--seeds', default='1,2', help='tuning campaign seeds, comma-separated (default 1,2)')
     parser.add_argument('--sampler-seed', type=int, default=0, help='seed of the TPE sampler (default 0)')
-    parser.add_argument('--objective', choices=('median', 'p95'), default='median',
+    from .tune import OBJECTIVES
+    parser.add_argument('--objective', choices=OBJECTIVES, default='median',
                         help="the statistic of the flights' position RMSE minimised, subject to 99 %% finished "
                              '(default median; p95: the tail). Either way gains-KIND-median.yaml and '
                              'gains-KIND-p95.yaml hold the pick of each from the same trials')

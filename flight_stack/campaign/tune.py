@@ -80,10 +80,15 @@ def objective(rows: list[dict], max_error_m: float, statistic: str = 'median') -
     rmse = [r['rmse_position_m'] if r['finished'] else max_error_m for r in rows]
     finished = sum(1 for r in rows if r['finished'])
     median, p95 = (float(v) for v in np.percentile(rmse, [50.0, 95.0]))
-    share = finished / len(rows)
-    value = (median if statistic == 'median' else p95) if share >= REQUIRED_FINISHED_SHARE else \
-        max_error_m * (2.0 - share)
+    value = penalised(median if statistic == 'median' else p95, finished, len(rows), max_error_m)
     return Score(value, median, p95, finished, len(rows))
+
+
+def penalised(value: float, finished: int, flights: int, max_error_m: float) -> float:
+    """``value`` [m] if ``finished`` of ``flights`` is at least the required share, else the penalty
+    ``max_error_m * (2 - finished share)`` (the module docstring)."""
+    share = finished / flights
+    return value if share >= REQUIRED_FINISHED_SHARE else max_error_m * (2.0 - share)
 
 
 def pick_value(attrs: dict, statistic: str, max_error_m: float) -> float:
@@ -93,8 +98,7 @@ def pick_value(attrs: dict, statistic: str, max_error_m: float) -> float:
     flights = attrs.get('flights') or 0
     if not flights or math.isnan(recorded):
         return math.nan
-    share = attrs['finished'] / flights
-    return recorded if share >= REQUIRED_FINISHED_SHARE else max_error_m * (2.0 - share)
+    return penalised(recorded, attrs['finished'], flights, max_error_m)
 
 
 def cannot_reach_required_share(failed: int, total_flights: int) -> bool:

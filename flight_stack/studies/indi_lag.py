@@ -18,14 +18,13 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import replace
-from pathlib import Path
 
-import numpy as np
 import yaml
 
 from flight_stack.campaign.results import FLIGHTS_FILE, read_flights
 from flight_stack.campaign.runner import RunOptions, holds_campaign, run_campaign
 from flight_stack.campaign.spec import load_spec
+from flight_stack.campaign.tune import objective
 from nnit2fsmc_controller.factory import load_gains
 from quad_msgs_bridge.validation import check_number
 
@@ -42,10 +41,11 @@ def assumed(factor: str, tuned: float, true_lag: float) -> float:
 
 
 def cell(flights: list[dict], max_error_m: float) -> str:
-    """'finished/flights: p50 / p95 [cm]' of a cell's flights (failures counted as ``max_error_m``)."""
-    rmse = [row['rmse_position_m'] if row['finished'] else max_error_m for row in flights]
-    p50, p95 = np.percentile(rmse, [50.0, 95.0]) * 100.0
-    return f'{sum(row["finished"] for row in flights)}/{len(flights)}: {p50:.2f} / {p95:.2f}'
+    """'finished/flights: p50 / p95 [cm]' of a cell's flights (failures counted as ``max_error_m``, as the
+    tuning objective counts them: :func:`flight_stack.campaign.tune.objective`)."""
+    score = objective(flights, max_error_m)
+    return (f'{score.finished}/{score.flights}: {score.median_rmse_m * 100.0:.2f} / '
+            f'{score.p95_rmse_m * 100.0:.2f}')
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

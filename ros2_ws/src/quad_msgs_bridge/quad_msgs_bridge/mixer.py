@@ -140,10 +140,14 @@ def priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
 
 
 @njit(cache=True, error_model='numpy')
-def airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
-    """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m]: the moments are kept when the collective thrust
-    asked for is below what they need (airmode at low thrust: attitude authority whatever U1 asks, even U1 <= 0);
-    otherwise :func:`priority_allocation` (U1 kept, the moments scaled to fit).
+def airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max, airborne=True):
+    """Rotor thrusts [N] for U1 [N], U2 [N], U3 [N], U4 [N m]: where ``airborne`` (a bool, or one per vehicle),
+    the moments are kept when the collective thrust asked for is below what they need (airmode at low thrust:
+    attitude authority whatever U1 asks, even U1 <= 0); otherwise :func:`priority_allocation` (U1 kept, the
+    moments scaled to fit). On the ground it is 'priority', since moments realised against the ground tip a
+    vehicle as it lifts off (PX4 warns the same of its airmode); the controllers pass airborne above
+    ``common.takeoff_height``. With that, airmode still finishes fewer flights than 'priority' on the
+    drawn-actuator campaign (docs/BASELINES.md, section 5).
 
     With the notation of :func:`priority_allocation`, F_i = m + d_i where the differential parts are
     d = (-t13/2 - y, -t24/2 + y, t13/2 - y, t24/2 + y) and W = f_max - f_min is the range of one rotor.
@@ -165,7 +169,7 @@ def airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
     lowest_asked = np.minimum(np.minimum(-0.5 * t13 - yaw, -0.5 * t24 + yaw),
                               np.minimum(0.5 * t13 - yaw, 0.5 * t24 + yaw))
     thrust_first = priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
-    below = 0.25 * u1 < f_min - lowest_asked
+    below = (0.25 * u1 < f_min - lowest_asked) & airborne
     if not np.any(below):
         return thrust_first
     span = f_max - f_min
@@ -185,28 +189,20 @@ def airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max):
 
 @njit(cache=True, error_model='numpy')
 def allocate_by_index(index, u1, u2, u3, u4, mixer, f_min, f_max, airborne=True):
-    """:func:`allocate` for the allocation ALLOCATIONS[index] (what a compiled kernel holds), of one vehicle."""
-    if index == 0 or (index == 2 and not airborne):
+    """:func:`allocate` for the allocation ALLOCATIONS[index] (what a compiled kernel holds)."""
+    if index == 0:
         return priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
     if index == 1:
         return clip_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
-    return airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
+    return airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max, airborne)
 
 
 def allocate(allocation, u1, u2, u3, u4, mixer, f_min, f_max, airborne=True):
     """Rotor thrusts [N] for U1..U4 by ``allocation``: 'priority' (:func:`priority_allocation`), 'clip'
     (:func:`clip_allocation`) or 'airmode' (:func:`airmode_allocation`), in the layout ``mixer``
-    (``VehicleParams.mixer``). Airmode acts only where ``airborne`` (a bool, or one per vehicle; the controllers
-    pass: above ``common.takeoff_height``): on the ground it is 'priority', since moments realised against the
-    ground tip a vehicle as it lifts off (PX4 warns the same of its airmode). With it, airmode still finishes fewer
-    flights than 'priority' on the drawn-actuator campaign (docs/BASELINES.md, section 5)."""
+    (``VehicleParams.mixer``); ``airborne`` is airmode's (:func:`airmode_allocation`)."""
     if allocation not in ALLOCATIONS:
         raise ValueError(f'allocation {allocation!r} is not one of {", ".join(ALLOCATIONS)}')
-    if allocation == 'airmode' and not np.all(airborne):
-        thrust_first = priority_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
-        if not np.any(airborne):
-            return thrust_first
-        kept = airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max)
-        return tuple(select(airborne, a, b) for a, b in zip(kept, thrust_first))
-    return (priority_allocation, clip_allocation, airmode_allocation)[ALLOCATIONS.index(allocation)](
-        u1, u2, u3, u4, mixer, f_min, f_max)
+    if allocation == 'airmode':
+        return airmode_allocation(u1, u2, u3, u4, mixer, f_min, f_max, airborne)
+    return (priority_allocation, clip_allocation)[ALLOCATIONS.index(allocation)](u1, u2, u3, u4, mixer, f_min, f_max)
