@@ -52,3 +52,10 @@ def test_indi_lag_cells_take_the_true_lag_or_a_factor_and_count_failures_as_the_
     flights = [{'finished': True, 'rmse_position_m': 0.01}] * 18 + [{'finished': False, 'rmse_position_m': 0.02}] * 2
     # p50 of eighteen 1 cm and two failures (1 m each) is 1 cm; p95 lies between the 19th and 20th value: 1 m
     assert cell(flights, 1.0) == '18/20: 1.00 / 100.00'
+
+
+@pytest.mark.parametrize('option, value', [('--lags', 'abc'), ('--lags', '-1'), ('--factors', 'twice')])
+def test_indi_lag_refuses_a_bad_list_naming_the_option_before_flying(tmp_path, option, value):
+    refused = study('indi-lag', '--out', str(tmp_path), option, value)
+    assert refused.returncode == 2 and refused.stderr.startswith(f'error: {option}: '), refused.stderr
+    assert not (tmp_path / 'indi-lag').exists()

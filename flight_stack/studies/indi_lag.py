@@ -26,7 +26,7 @@ from flight_stack.campaign.runner import RunOptions, holds_campaign, run_campaig
 from flight_stack.campaign.spec import load_spec
 from flight_stack.campaign.tune import objective
 from nnit2fsmc_controller.factory import load_gains
-from quad_msgs_bridge.validation import check_number
+from quad_msgs_bridge.validation import ParameterError, check_number
 
 from .common import add_out, names, progress, study_name, write_table
 
@@ -38,6 +38,14 @@ TRUE = 'true'   #: the column whose tau-hat is the true lag
 def assumed(factor: str, tuned: float, true_lag: float) -> float:
     """tau-hat [s] of a column: ``factor`` times the gains' ``tuned`` value, or the ``true_lag`` itself."""
     return true_lag if factor == TRUE else float(factor) * tuned
+
+
+def number(option: str, text: str) -> float:
+    """``text`` of a comma-separated ``option`` as a number; ParameterError naming the option if it is not one."""
+    try:
+        return float(text)
+    except ValueError:
+        raise ParameterError(f'{option}: {text!r} is not a number') from None
 
 
 def cell(flights: list[dict], max_error_m: float) -> str:
@@ -63,11 +71,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    lags = [check_number('--lags', float(text), 0.0) for text in names(args.lags)]
+    lags = [check_number('--lags', number('--lags', text), 0.0) for text in names(args.lags)]
     factors = names(args.factors)
     for factor in factors:
         if factor != TRUE:
-            check_number('--factors', float(factor), 0.0)
+            check_number('--factors', number('--factors', factor), 0.0)
     spec = load_spec(args.spec).overridden(flights=args.flights, duration=args.duration, seed=args.seed,
                                            controllers=[KIND])
     gains = load_gains(args.gains, kind=KIND)
