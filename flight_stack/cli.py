@@ -95,6 +95,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
                              'PX4_DIR; docs/PX4.md)')
     parser.add_argument('--xrce-agent', type=Path, default=None,
                         help='--plant px4-sitl: the Micro XRCE-DDS Agent executable (default: MicroXRCEAgent on PATH)')
+    parser.add_argument('--px4-takeoff', choices=('px4', 'controller'), default=None,
+                        help='--plant px4-sitl: who takes off: px4 (the default: PX4\'s position controller takes the '
+                             'vehicle to the reference\'s first point, raised to 2.5 m above the ground, and the '
+                             'controller flies the scenario from there) or controller (ours, from the ground; '
+                             'docs/PX4.md, "Take-off")')
     parser.add_argument('--physics-rate', type=float, default=1000.0, help='RK4 rate [Hz], a multiple of the control rate')
     parser.add_argument('--settle-time', type=float, default=None,
                         help='metrics ignore the first S seconds (default: 5, or half of a flight shorter than 10 s)')
@@ -201,7 +206,8 @@ def check_px4_options(args):
     from quad_msgs_bridge.validation import ParameterError
     from quad_sim.plants import PX4_SITL
     if args.plant != PX4_SITL:
-        for option, value in (('--px4-dir', args.px4_dir), ('--xrce-agent', args.xrce_agent)):
+        for option, value in (('--px4-dir', args.px4_dir), ('--xrce-agent', args.xrce_agent),
+                              ('--px4-takeoff', args.px4_takeoff)):
             if value is not None:
                 raise ParameterError(f'{option}: an option of --plant {PX4_SITL}')
         return None
@@ -384,7 +390,7 @@ def launch_of(args: argparse.Namespace) -> Launch:
     """The backend options of the command line."""
     return Launch(vehicles=args.vehicles, namespace=args.namespace, quiet=args.quiet, mode=args.mode,
                   speed_factor=args.speed_factor, extra_subscribers=args.extra_subscribers, record_by=args.record_by,
-                  vehicle_file=args.vehicle, px4=getattr(args, 'px4', None))
+                  vehicle_file=args.vehicle, px4=getattr(args, 'px4', None), px4_takeoff=args.px4_takeoff or 'px4')
 
 
 def unfinished(output, message: str, code: int) -> int:

@@ -87,6 +87,10 @@ class RosFlightConfig:
     publish_tf: bool = True   #: the simulator broadcasts every vehicle's odom -> <ns>/base_link on /tf
     plant: str = 'quad_sim'   #: what the simulator node flies (its parameter plant; quad_sim.plants.PLANTS)
     px4: object = None        #: plant px4-sitl: flight_stack.px4_sitl.Px4Install
+    #: plant px4-sitl: who takes off, 'px4' (PX4's position controller to the reference's first point, the scenario
+    #: shifted up to start PX4_TAKEOFF_ALTITUDE above the ground, and flown from there) or 'controller' (ours, from
+    #: the ground); docs/PX4.md, "Take-off"
+    px4_takeoff: str = 'px4'
     max_error: float | None = None   #: [m] the run's --max-error, noted in the bag for its review
 
 
@@ -119,8 +123,12 @@ def _ros_args(namespace: str, params: dict) -> list[str]:
 PX4_LANDING_TIMEOUT = 60.0
 #: [s] the bridge's odometry timeout when PX4's own controller flies (ours: the node's default, 0.1 s)
 PX4_OWN_ODOM_TIMEOUT = 0.5
-#: [s, wall] for PX4 SITL to start and pass its pre-flight checks, and to land after the flight
-PX4_OVERHEAD = 120.0
+#: [s, wall] for PX4 SITL to start and pass its pre-flight checks, take off (px4_takeoff 'px4'), and to land after
+#: the flight
+PX4_OVERHEAD = 150.0
+#: [m] PX4's take-off height above the arming point, where our controller takes over: PX4's own default take-off
+#: altitude (MIS_TAKEOFF_ALT, navigator/mission_params.c)
+PX4_TAKEOFF_ALTITUDE = 2.5
 
 
 def fly_ros(config: RosFlightConfig) -> RosFlightResult:
@@ -210,6 +218,22 @@ def fly_ros(config: RosFlightConfig) -> RosFlightResult:
     return RosFlightResult(wall, failed, codes, report, tuple(processes[-1].lines) if processes else ())
 
 
+def px4_flight_start(scenario: str, offset: Sequence[float], takeoff: str) -> tuple[list, list, float]:
+    """Where a PX4 flight starts: the scenario's offset [m, world ENU], and our frame's position [m, world ENU] and
+    heading [rad] of the vehicle at flight time 0 (the PX4 bridge's ``initial_position`` and ``initial_yaw``).
+
+    ``takeoff`` 'px4': PX4 takes the vehicle to where the reference starts, raised to PX4_TAKEOFF_ALTITUDE above the
+    arming point (so our heights stay heights above it), and the scenario is flown from its first reference point,
+    at rest there; 'controller': from the ground below it, as on our simulator."""
+    offset = [float(v) for v in offset]
+    if takeoff == 'px4':
+        offset[2] += PX4_TAKEOFF_ALTITUDE - make_scenario(scenario).sample(0.0).position[2]
+        start = make_scenario(scenario, offset=offset).sample(0.0)
+        return offset, [float(v) for v in start.position], float(start.yaw)
+    initial = make_scenario(scenario, offset=offset).initial_state
+    return offset, [float(v) for v in initial[0:3]], float(initial[8])
+
+
 def fly_px4(config: RosFlightConfig) -> RosFlightResult:
     """A flight on PX4 SITL (module docstring): the Agent and PX4 first, then the trajectory node, the controller
     node (none for the px4 kind) and the PX4 bridge, which ends the flight."""
@@ -219,7 +243,7 @@ def fly_px4(config: RosFlightConfig) -> RosFlightResult:
         raise ValueError('a PX4 SITL flight needs px4 (find_px4), one vehicle and record_by publishers')
     [vehicle] = config.vehicles
     home = vehicle.namespace
-    trajectory = make_scenario(config.scenario, offset=vehicle.offset)
+    offset, initial_position, initial_yaw = px4_flight_start(config.scenario, vehicle.offset, config.px4_takeoff)
     parts = part_directory(config.bag)
     shutil.rmtree(parts, ignore_errors=True)
     logged = {'record_dir': str(parts)}
@@ -230,7 +254,7 @@ def fly_px4(config: RosFlightConfig) -> RosFlightResult:
     own = config.controller == PX4_CONTROLLER
     nodes = [('trajectory', 'nnit2fsmc_controller', 'trajectory', 'nnit2fsmc_controller.trajectory_node',
               {'use_sim_time': False, 'scenario': config.scenario, 'duration': config.duration,
-               'setpoint_rate': config.setpoint_rate, 'start_time': 0.0, 'offset': list(vehicle.offset), **logged})]
+               'setpoint_rate': config.setpoint_rate, 'start_time': 0.0, 'offset': offset, **logged})]
     if not own:
         nodes.append(('controller', 'nnit2fsmc_controller', 'nnit2fsmc_controller',
                       'nnit2fsmc_controller.controller_node',
@@ -242,8 +266,8 @@ def fly_px4(config: RosFlightConfig) -> RosFlightResult:
                    # PX4's own controller flies on its own estimate: a gap in the odometry we see is no reason to
                    # take the vehicle from it (a 0.1 s gap ended one such flight on this loaded machine)
                    **({'odom_timeout': PX4_OWN_ODOM_TIMEOUT} if own else {}),
-                   'exit_at_end': True, 'initial_position': [float(v) for v in trajectory.initial_state[0:3]],
-                   'initial_yaw': float(trajectory.initial_state[8]),
+                   'exit_at_end': True, 'initial_position': initial_position, 'initial_yaw': initial_yaw,
+                   'takeoff': config.px4_takeoff, 'takeoff_altitude': PX4_TAKEOFF_ALTITUDE,
                    'target_system': slot.target_system, 'px4_namespace': slot.namespace,
                    'vehicle_file': str(config.vehicle_file) if config.vehicle_file else 'px4-sih-quadx', **logged}))
     processes: list[NodeProcess] = []

@@ -31,6 +31,7 @@ class Launch:
     record_by: str | None = None        #: ROS backend: who writes the bag (recorder or publishers)
     vehicle_file: Path | None = None    #: the nominal vehicle's file, as given (the ROS nodes read it)
     px4: object = None                  #: --plant px4-sitl: where PX4 SITL and the Agent are (flight_stack.px4_sitl)
+    px4_takeoff: str = 'px4'            #: --plant px4-sitl: who takes off (RosFlightConfig.px4_takeoff)
 
 
 def live_sinks(view, speed_factor: float) -> list:
@@ -173,7 +174,7 @@ def fly_on_ros(launch: 'Launch', plan, bag: Path, bag_shown: Path | None) -> lis
             topics=[t.name for t in plan.topics], mode=launch.mode, speed_factor=launch.speed_factor,
             extra_odom_subscribers=launch.extra_subscribers, vehicle_file=launch.vehicle_file, gains_file=gains_file,
             settle_time=plan.settle_time, quiet=launch.quiet, record_by=launch.record_by, max_error=plan.max_error,
-            plant=plan.plant, px4=launch.px4))
+            plant=plan.plant, px4=launch.px4, px4_takeoff=launch.px4_takeoff))
     if result.failed_node:
         raise FlightStopped(f'the flight failed: {result.failed_node} (exit codes {result.exit_codes})'
                             + (f'; the bag is closed: {bag}' if bag_shown and bag.exists() else ''),

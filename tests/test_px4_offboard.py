@@ -22,14 +22,18 @@ COM_DISARM_LAND = 2.0           #: [s] default, commander_params.c
 
 class FakePx4:
     """PX4's side, scripted: odometry at 100 Hz from a kinematic vehicle (offboard and armed: it climbs to 1 m at
-    0.5 m/s, as our controller would fly it; AUTO_LAND: it descends to the ground at 0.5 m/s), VehicleStatus with
-    every tick; accepts offboard only after >= 1 s of heartbeats, arms only in offboard; leaves offboard for
-    Position mode COM_OF_LOSS_T after the last heartbeat; disarms COM_DISARM_LAND after touching down."""
+    0.5 m/s, as our controller would fly it, or while the heartbeat names the position level, to the height of the
+    latest TrajectorySetpoint as PX4's position controller would, up to ``ceiling``; AUTO_LAND: it descends to the
+    ground at 0.5 m/s), VehicleStatus with every tick; accepts offboard only after >= 1 s of heartbeats, arms only
+    in offboard; leaves offboard for Position mode COM_OF_LOSS_T after the last heartbeat; disarms COM_DISARM_LAND
+    after touching down."""
 
-    def __init__(self, odometry_period=0.01, bad_odometry=None):
+    def __init__(self, odometry_period=0.01, bad_odometry=None, ceiling=math.inf):
         """``odometry_period`` [s] (None: no odometry at all)."""
         self.armed, self.nav_state = False, NAVIGATION_STATE_POSCTL
         self.z, self.vz = 0.0, 0.0
+        self.ceiling = ceiling                    #: [m] the highest it climbs (a take-off that stalls)
+        self.target_z = None                      #: [m, ENU] while PX4's position controller flies: its setpoint
         self.stream_start = self.last_heartbeat = None
         self.last_odometry = -math.inf
         self.odometry_period = odometry_period
@@ -49,8 +53,12 @@ class FakePx4:
                 self.stream_start = now
             self.last_heartbeat = now
             self.modes.append((now, output.mode))
+            if not output.mode.position:
+                self.target_z = None
         if output.setpoint is not None:
             self.setpoints.append((now, output.setpoint))
+            if output.setpoint.trajectory is not None and self.modes and self.modes[-1][1].position:
+                self.target_z = -output.setpoint.trajectory.position[2]        # NED -> ENU
         for command in output.commands:
             self.received.append((now, command))
             if command.command == VEHICLE_CMD_DO_SET_MODE and command.param2 == 6.0:
@@ -69,7 +77,10 @@ class FakePx4:
         if self.armed and self.nav_state == NAVIGATION_STATE_OFFBOARD and not self.heartbeat_recent(now):
             self.nav_state = NAVIGATION_STATE_POSCTL          # offboard loss: COM_OBL_RC_ACT 0
             self.offboard_losses += 1
-        if self.armed and self.nav_state == NAVIGATION_STATE_OFFBOARD:
+        if self.armed and self.nav_state == NAVIGATION_STATE_OFFBOARD and self.target_z is not None:
+            target = min(self.target_z, self.ceiling)
+            self.vz = math.copysign(min(0.5, abs(target - self.z) / DT), target - self.z)
+        elif self.armed and self.nav_state == NAVIGATION_STATE_OFFBOARD:
             self.vz = 0.5 if self.z < 1.0 else 0.0
         elif self.armed and self.nav_state == NAVIGATION_STATE_AUTO_LAND:
             self.vz = -0.5 if self.z > 0.0 else 0.0
@@ -98,6 +109,7 @@ class Controller:
         self.silent_from = silent_from
         self.forces = forces or (SIH.hover_force,) * 4
         self.stamps = []
+        self.samples = []                         #: every odometry sample it got
         self.last_answer = None
 
     def answer(self, now):
@@ -110,6 +122,7 @@ class Controller:
     def take(self, odometry):
         if odometry is not None:
             self.stamps.append(odometry.stamp)
+            self.samples.append(odometry)
             self.pending = True
 
 
@@ -180,6 +193,60 @@ def test_the_heartbeat_runs_at_20_hz_from_the_first_fresh_odometry():
     assert max(gaps) <= 0.05 + DT + 1e-9 and min(gaps) >= 0.05 - 1e-9    # every 50 ms: 20 Hz, PX4 needs > 2 Hz
     assert times[0] == pytest.approx(0.0, abs=DT)
     assert len(times) == pytest.approx(3.0 / 0.05, abs=2)
+
+
+# ---------------------------------------------------------------- PX4's take-off and the hand-over
+@pytest.mark.parametrize('level', ['direct_actuator', 'thrust_and_torque'])
+def test_px4_takes_off_and_hands_over_to_our_controller_at_the_takeoff_point(level):
+    config = OffboardConfig(control_level=level, takeoff='px4', takeoff_altitude=2.5, initial_position=(1.0, 0.0, 2.5),
+                            handover_speed=0.3)
+    core, fake, controller = OffboardCore(SIH, config), FakePx4(), Controller()
+    phases, events = fly(core, fake, controller, until=20.0, land_at=12.0)
+    assert phases == [Phase.WAITING, Phase.STREAMING, Phase.REQUESTING, Phase.TAKING_OFF, Phase.FLYING,
+                      Phase.LANDING, Phase.DONE]
+    assert not fake.armed and fake.z == 0.0 and fake.offboard_losses == 0
+    [(armed_at, _)] = [(t, c) for t, c in commands_of(fake, VEHICLE_CMD_COMPONENT_ARM_DISARM) if c.param1 == 1.0]
+    [handover] = [e for e in events if e.startswith('taking_off -> flying')]
+    # up to the controller's first answer: the position level, PX4 holding the take-off point 2.5 m up at the
+    # arming heading (the fake's psi 0.3 rad ENU: pi/2 - 0.3 in NED)
+    first_motor = next(t for t, sp in fake.setpoints if sp.trajectory is None and t > armed_at)
+    held = [sp.trajectory for t, sp in fake.setpoints if armed_at <= t < first_motor]
+    assert held and all(tr.position == pytest.approx((0.0, 0.0, -2.5)) and tr.velocity == pytest.approx((0, 0, 0))
+                        and tr.yaw == pytest.approx(math.pi / 2 - 0.3) for tr in held)
+    assert all(m.position and not (m.direct_actuator or m.thrust_and_torque) for t, m in fake.modes
+               if armed_at <= t < first_motor)
+    # the flight starts once at the take-off point and slower than handover_speed for handover_hold: the fake climbs
+    # at 0.5 m/s (too fast to hand over) for 5 s, then holds
+    flight_start = first_motor - DT
+    assert 5.0 + 1.0 <= flight_start - armed_at <= 5.0 + 1.0 + 0.05 and 'for 1 s: our controller flies' in handover
+    # our odom: from flight time 0 there, the vehicle at initial_position (the take-off point moved to it)
+    assert controller.stamps[0] == 0.0
+    before_landing = [stamp for stamp in controller.stamps if stamp < 12.0 - flight_start]
+    assert len(before_landing) == pytest.approx((12.0 - flight_start) / 0.01, abs=2)
+    # the level changes with the controller's first answer, heartbeat and setpoint in one tick, and stays
+    switch_at, switch = next((t, m) for t, m in fake.modes if t >= first_motor)
+    assert switch_at == first_motor and switch.direct_actuator == (level == 'direct_actuator')
+    assert all(not m.position for t, m in fake.modes if t >= first_motor)
+    assert fake.target_z is None and fake.z == 0.0
+
+
+def test_the_first_odometry_after_the_handover_puts_the_vehicle_at_the_scenarios_start():
+    config = OffboardConfig(takeoff='px4', takeoff_altitude=2.5, initial_position=(1.0, -2.0, 2.5), initial_yaw=0.4)
+    core, fake, controller = OffboardCore(SIH, config), FakePx4(), Controller()
+    fly(core, fake, controller, until=10.0)
+    first = controller.samples[0]
+    x, y, z, w = first.orientation
+    assert first.stamp == 0.0 and first.position == pytest.approx((1.0, -2.0, 2.5))
+    assert math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)) == pytest.approx(0.4)
+
+
+def test_a_takeoff_that_does_not_reach_its_point_hands_the_vehicle_to_px4s_land_mode():
+    config = OffboardConfig(takeoff='px4', takeoff_altitude=2.5, takeoff_timeout=8.0)
+    core, fake, controller = OffboardCore(SIH, config), FakePx4(ceiling=1.5), Controller()
+    phases, events = fly(core, fake, controller, until=20.0)
+    assert phases[-3:] == [Phase.TAKING_OFF, Phase.FAILSAFE, Phase.DONE] and controller.stamps == []
+    assert any('did not reach the take-off point within 8 s: PX4 lands' in e for e in events)
+    assert commands_of(fake, VEHICLE_CMD_NAV_LAND) and not fake.armed and fake.z == 0.0
 
 
 # ---------------------------------------------------------------- refusing to arm
@@ -265,6 +332,10 @@ def test_bad_settings_are_refused_with_their_name():
         OffboardConfig(heartbeat_period=0.5)
     with pytest.raises(ParameterError, match='odom_timeout'):
         OffboardConfig(odom_timeout=0.0)
+    with pytest.raises(ParameterError, match="takeoff: 'rocket' is not one of controller, px4"):
+        OffboardConfig(takeoff='rocket')
+    with pytest.raises(ParameterError, match='takeoff_altitude'):
+        OffboardConfig(takeoff_altitude=-1.0)
     paper, _ = load_vehicle_file('paper')
     with pytest.raises(ValueError, match='no PX4 rotor at its bearing'):
         OffboardCore(paper)

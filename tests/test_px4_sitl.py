@@ -157,6 +157,25 @@ def test_px4_sitl_flies_realtime_on_its_publication_logs_at_px4s_odometry_rate(m
     assert args.gain_settings == ['common.control_rate=250']
     with pytest.raises(ParameterError, match='--px4-dir: an option of --plant px4-sitl'):
         cli.check_px4_options(cli.parse_args(['--px4-dir', '/x']))
+    with pytest.raises(ParameterError, match='--px4-takeoff: an option of --plant px4-sitl'):
+        cli.check_px4_options(cli.parse_args(['--px4-takeoff', 'px4']))
+    assert cli.launch_of(cli.parse_args(['--plant', 'px4-sitl'])).px4_takeoff == 'px4'
+    assert cli.launch_of(cli.parse_args(['--px4-takeoff', 'controller'])).px4_takeoff == 'controller'
+
+
+@pytest.mark.parametrize('scenario, offset, takeoff, start', [
+    # PX4 takes off to the reference's first point raised to 2.5 m: the hover holds there, the helix leaves from it
+    ('hover', (0.0, 0.0, 0.0), 'px4', ((0.0, 0.0, 1.5), (0.0, 0.0, 2.5), 0.0)),
+    ('paper', (0.0, 0.0, 0.0), 'px4', ((0.0, 0.0, 2.5), (1.0, 0.0, 2.5), 0.0)),
+    ('paper', (0.0, 3.0, 0.5), 'px4', ((0.0, 3.0, 3.0), (1.0, 3.0, 3.0), 0.0)),
+    # our controller takes off: on the ground below the first point, as on our simulator
+    ('hover', (0.0, 0.0, 0.0), 'controller', ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), 0.0)),
+])
+def test_a_px4_flight_starts_where_its_takeoff_leaves_the_vehicle(scenario, offset, takeoff, start):
+    from flight_stack.ros_backend import PX4_TAKEOFF_ALTITUDE, px4_flight_start
+    assert PX4_TAKEOFF_ALTITUDE == 2.5
+    shift, position, yaw = px4_flight_start(scenario, offset, takeoff)
+    assert shift == pytest.approx(start[0]) and position == pytest.approx(start[1]) and yaw == pytest.approx(start[2])
 
 
 def test_each_run_holds_its_own_instance_domain_and_port(monkeypatch, tmp_path):

@@ -23,7 +23,7 @@ from flight_stack.campaign.stress import (KINDS, BreakingPoint, StressSetup, Tal
                                           write_tries)
 from flight_stack.campaign.tune import TuneSetup, objective, tune
 from nnit2fsmc_controller.factory import build_controller, load_gains
-from nnit2fsmc_controller.search_spaces import SEARCH_SPACES, search_space, values_in, with_values
+from nnit2fsmc_controller.search_spaces import ATTITUDE_SPACES, SEARCH_SPACES, search_space, values_in, with_values
 from quad_msgs_bridge.validation import ParameterError
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
@@ -57,10 +57,28 @@ def test_every_search_space_holds_the_packaged_gains_and_sets_what_it_names(kind
     build_controller(kind, load_vehicle_file()[0], tuned)
 
 
+@pytest.mark.parametrize('kind', sorted(SEARCH_SPACES))
+def test_every_kind_has_roll_and_pitch_dimensions_that_hold_the_packaged_gains(kind):
+    """--attitude adds the kind's roll and pitch loop: every gain it names in phi and theta alike, the packaged
+    values inside the ranges, and a point of it flies (builds) with both axes set."""
+    gains = load_gains()
+    whole = search_space(kind, attitude=True)
+    assert whole[:len(search_space(kind))] == search_space(kind) and whole[len(search_space(kind)):] == ATTITUDE_SPACES[kind]
+    added = ATTITUDE_SPACES[kind]
+    assert 2 <= len(added) <= 3 and all(d.name.startswith('rp.') for d in added)
+    assert all(len(d.gains) == 2 and d.gains[0].replace('phi', 'theta') == d.gains[1] for d in added)
+    start = values_in(gains, kind, attitude=True)
+    lowered = {**start, **{d.name: d.low for d in added}}
+    tuned = with_values(gains, kind, lowered, attitude=True)
+    assert values_in(tuned, kind, attitude=True) == pytest.approx(lowered)
+    build_controller(kind, load_vehicle_file()[0], tuned)
+    assert search_space('nnit2fsmc-bias', attitude=True) == search_space('nnit2fsmc', attitude=True)
+
+
 def test_no_two_kinds_tune_the_same_gain_so_every_tuned_point_fits_one_gains_file():
     owners = {}
     for kind, space in SEARCH_SPACES.items():
-        for dimension in space:
+        for dimension in space + ATTITUDE_SPACES[kind]:
             for gain in dimension.gains:
                 assert owners.setdefault(gain, kind) == kind, f'{gain}: tuned by {owners[gain]} and {kind}'
 
@@ -169,10 +187,27 @@ def test_tune_writes_gains_no_worse_than_the_start_on_the_same_flights_and_resum
                   progress=False)
     assert second.trials == 3 and second.starting_objective_m == first.starting_objective_m
     assert len(set((out / 'campaigns').iterdir()) - folders) == 1
-    # another spec in the same folder is refused
+    # another spec in the same folder is refused, and so is the same one searching the attitude loop too
     with pytest.raises(ParameterError, match='another spec'):
         tune(TuneSetup('pid', SPEC.overridden(flights=2), seeds=(1,), trials=3, out_dir=out, options=options),
              progress=False)
+    with pytest.raises(ParameterError, match='another spec'):
+        tune(TuneSetup('pid', SPEC, seeds=(1,), trials=3, out_dir=out, options=options, sampler_seed=3,
+                       attitude=True), progress=False)
+
+
+def test_tune_with_attitude_searches_and_writes_the_roll_and_pitch_loop(scheduler, tmp_path):
+    out = tmp_path / 'tune'
+    setup = TuneSetup('se3', SPEC, seeds=(1,), trials=2, out_dir=out, options=RunOptions(scheduler=scheduler),
+                      attitude=True)
+    tune(setup, progress=False)
+    with (out / 'trials-se3.csv').open() as stream:
+        table = list(csv.DictReader(stream))
+    assert {'rp.k_error', 'rp.k_integral', 'rp.k_rate'} <= set(table[0])
+    assert float(table[0]['rp.k_error']) == load_gains()['se3']['axes']['phi']['k_error']     # trial 0: the start
+    picked = load_gains(out / 'gains-se3.yaml')['se3']['axes']
+    best = min((row for row in table if row['state'] == 'complete'), key=lambda row: float(row['objective_m']))
+    assert picked['phi']['k_rate'] == picked['theta']['k_rate'] == pytest.approx(float(best['rp.k_rate']))
 
 
 # --- stress --------------------------------------------------------------------------------------

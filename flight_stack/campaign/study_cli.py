@@ -68,6 +68,10 @@ def tune_main(argv: list[str]) -> int:
                         help="the statistic of the flights' position RMSE minimised, subject to 99 %% finished "
                              '(default median; p95: the tail). Either way gains-KIND-median.yaml and '
                              'gains-KIND-p95.yaml hold the pick of each from the same trials')
+    parser.add_argument('--attitude', action='store_true',
+                        help='search the kind\'s roll and pitch loop too (its stiffness, damping and integral gains, '
+                             'nnit2fsmc_controller/search_spaces.py ATTITUDE_SPACES), for a world whose actuator or '
+                             'control rate the packaged attitude loops were not made for (docs/PX4.md)')
     args = parser.parse_args(argv)
     from .spec import load_spec
     from .tune import TuneSetup, parse_seeds, tune
@@ -77,7 +81,7 @@ def tune_main(argv: list[str]) -> int:
         spec = load_spec(args.spec).overridden(flights=args.flights, duration=args.duration,
                                                controllers=[args.controller])
         setup = TuneSetup(args.controller, spec, parse_seeds(args.seeds), args.trials, args.out,
-                          _run_options(args), args.sampler_seed, args.objective)
+                          _run_options(args), args.sampler_seed, args.objective, args.attitude)
         print(f'tune {setup.kind}: {setup.trials} trials x {len(setup.seeds)} seed(s) {args.seeds} x {spec.flights} '
               f'flights of "{spec.scenario}", {spec.duration:g} s each -> {args.out}', file=sys.stderr)
         outcome = tune(setup, progress=not args.quiet)

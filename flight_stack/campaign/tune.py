@@ -118,6 +118,7 @@ class TuneSetup:
     options: RunOptions            #: workers, scheduler, batch size, vehicle file; gains_file: the starting gains
     sampler_seed: int = 0
     objective: str = 'median'      #: the statistic minimised (OBJECTIVES)
+    attitude: bool = False         #: the kind's roll and pitch loop searched too (search_spaces.ATTITUDE_SPACES)
 
     def __post_init__(self):
         seed = self.sampler_seed
@@ -133,8 +134,16 @@ class TuneSetup:
         """What makes two runs the same study (kept in the study; a resume must match it)."""
         identity = {'kind': self.kind, 'spec': self.spec.to_mapping(), 'seeds': list(self.seeds),
                     'vehicle_file': self.options.vehicle_file, 'starting_gains': _digest(self.starting_gains())}
-        # the median's studies were made before there was a choice: their identity stays what it was
-        return identity if self.objective == 'median' else {**identity, 'objective': self.objective}
+        # the median's position-loop studies were made before there was a choice: their identity stays what it was
+        if self.objective != 'median':
+            identity['objective'] = self.objective
+        if self.attitude:
+            identity['attitude'] = True
+        return identity
+
+    def space(self) -> tuple:
+        """The dimensions it searches."""
+        return search_space(self.kind, self.attitude)
 
     def starting_gains(self) -> dict:
         return load_gains(self.options.gains_file, kind=self.kind)
@@ -187,7 +196,8 @@ def open_study(setup: TuneSetup):
     stored = study.user_attrs.get('identity')
     if stored is None:
         study.set_user_attr('identity', identity)
-        study.enqueue_trial(values_in(setup.starting_gains(), setup.kind), user_attrs={'starting_gains': True})
+        study.enqueue_trial(values_in(setup.starting_gains(), setup.kind, setup.attitude),
+                            user_attrs={'starting_gains': True})
     elif stored != identity:
         raise ParameterError(f'--out: {setup.out_dir} holds a tuning of another spec, kind, seeds or starting '
                              f'gains ({json.dumps(stored)}); use another --out')
@@ -222,7 +232,7 @@ def fly_point(setup: TuneSetup, values: dict, after_seed=None, label: str | None
     folder = trial_folder(setup, values)
     folder.mkdir(parents=True, exist_ok=True)
     gains_path = folder / 'gains.yaml'
-    gains_path.write_text(yaml.safe_dump(with_values(setup.starting_gains(), setup.kind, values), sort_keys=False))
+    gains_path.write_text(yaml.safe_dump(with_values(setup.starting_gains(), setup.kind, values, setup.attitude), sort_keys=False))
     try:
         CampaignSetup.of(setup.spec, setup.options.vehicle_file, gains_path).check_controllers((setup.kind,))
     except ParameterError as error:
@@ -246,7 +256,7 @@ def make_objective(setup: TuneSetup, say=None):
     (a function of a line of text), it says when a trial starts, shows each seed's flights as they finish
     and says each seed's score."""
     optuna = _optuna()
-    dimensions = search_space(setup.kind)
+    dimensions = setup.space()
     total_flights = setup.spec.flights * len(setup.seeds)
 
     def run(trial) -> float:
@@ -293,7 +303,7 @@ def _record(trial, score: Score) -> None:
     trial.set_user_attr('objective_m', score.objective_m)
 
 
-def trials_table(study, kind: str) -> list[dict]:
+def trials_table(study, dimensions) -> list[dict]:
     """One row per trial of ``study``: state, objective and its parts, the point (search names)."""
     rows = []
     for trial in study.get_trials(deepcopy=False):
@@ -309,13 +319,13 @@ def trials_table(study, kind: str) -> list[dict]:
             'seeds_flown': attrs.get('seeds_flown', 0),
             'pruned_because': attrs.get('pruned_because', '') or attrs.get('refused', ''),
             'wall_time_s': duration,
-            **{d.name: trial.params.get(d.name, math.nan) for d in search_space(kind)}})
+            **{d.name: trial.params.get(d.name, math.nan) for d in dimensions}})
     return rows
 
 
 def write_trials_table(study, setup: TuneSetup) -> Path:
     path = setup.out_dir / f'trials-{setup.kind}.csv'
-    rows = trials_table(study, setup.kind)
+    rows = trials_table(study, setup.space())
     columns = list(rows[0]) if rows else ['trial']
     with path.open('w', newline='') as stream:
         writer = csv.DictWriter(stream, fieldnames=columns, lineterminator='\n')
@@ -344,7 +354,7 @@ def write_gains(study, setup: TuneSetup, trial=None, suffix: str = '') -> Path:
     a ROS 2 parameter file (what ``--gains`` and the controller node's ``--params-file`` read), its provenance in
     the header."""
     best = study.best_trial if trial is None else trial
-    gains = with_values(setup.starting_gains(), setup.kind, best.params)
+    gains = with_values(setup.starting_gains(), setup.kind, best.params, setup.attitude)
     attrs = best.user_attrs
     p95 = f', p95 {attrs["p95_rmse_m"] * 100:.3f} cm' if 'p95_rmse_m' in attrs else ''
     lines = [f'# Tuned by run_stack.py tune for {setup.kind} (docs/TUNING.md): trial {best.number} of '
@@ -354,7 +364,7 @@ def write_gains(study, setup: TuneSetup, trial=None, suffix: str = '') -> Path:
              f'finished) on seeds {",".join(map(str, setup.seeds))} x {setup.spec.flights} flights of '
              f'"{setup.spec.scenario}", {setup.spec.duration:g} s each.',
              '# Searched: ' + ', '.join(f'{d.name} = {best.params[d.name]:.4g} {d.unit.split(" (")[0]}'
-                                        for d in search_space(setup.kind))]
+                                        for d in setup.space())]
     document = {'/**': {'ros__parameters': {'controller': setup.kind, **gains}}}
     path = setup.out_dir / f'gains-{setup.kind}{suffix}.yaml'
     path.write_text('\n'.join(lines) + '\n' + yaml.safe_dump(document, sort_keys=False))
@@ -386,7 +396,7 @@ def tune(setup: TuneSetup, progress: bool = True) -> TuneOutcome:
     the gains file and the trials table. ParameterError on invalid options, before anything flies."""
     optuna = _optuna()
     say = (lambda text: print(text, file=sys.stderr, flush=True)) if progress else (lambda text: None)
-    values_in(setup.starting_gains(), setup.kind)     # the starting point lies in the space
+    values_in(setup.starting_gains(), setup.kind, setup.attitude)     # the starting point lies in the space
     make_out_dir(setup.out_dir)
     with FileLock(setup.out_dir / LOCK_FILE,
                   lambda holder: f'--out: another tune is writing {setup.out_dir} (process {holder})'):

@@ -15,7 +15,7 @@ from .indi import INDIController
 from .l1_adaptive import L1SE3Controller
 from .registry import ControllerKind
 from .se3 import SE3Controller
-from .search_spaces import SEARCH_SPACES
+from .search_spaces import ATTITUDE_SPACES, SEARCH_SPACES
 
 #: the NNIT2FSMC's ablations (docs/ADAPTIVE.md): the IT2 term replaced by -K sat(S / Phi), type-1 fuzzy
 #: (lower membership functions = upper ones), learning off, and a network whose only input is the bias
@@ -118,19 +118,26 @@ def _indi(name: str, params: VehicleParams, gains: Mapping[str, Any], batch: int
 
 BUILT_IN = (
     ControllerKind('nnit2fsmc', 'the paper\'s NNIT2FSMC: IT2 fuzzy sliding mode with an online-learning network',
-                   _cascaded(_nnit2fsmc), 'nnit2fsmc', search_space=SEARCH_SPACES['nnit2fsmc']),
+                   _cascaded(_nnit2fsmc), 'nnit2fsmc', search_space=SEARCH_SPACES['nnit2fsmc'],
+                   attitude_space=ATTITUDE_SPACES['nnit2fsmc']),
     ControllerKind('smc-sign', 'sliding mode control with a sign switching term', _cascaded(_smc), 'smc'),
     ControllerKind('smc-sat', 'sliding mode control with a boundary layer', _cascaded(_smc), 'smc'),
     ControllerKind('smc-integral', 'integral sliding mode control with a boundary layer', _cascaded(_smc_integral),
-                   'smc_integral', search_space=SEARCH_SPACES['smc-integral']),
-    ControllerKind('pid', 'PID on every subsystem', _cascaded(_pid), 'pid', search_space=SEARCH_SPACES['pid']),
+                   'smc_integral', search_space=SEARCH_SPACES['smc-integral'],
+                   attitude_space=ATTITUDE_SPACES['smc-integral']),
+    ControllerKind('pid', 'PID on every subsystem', _cascaded(_pid), 'pid', search_space=SEARCH_SPACES['pid'],
+                   attitude_space=ATTITUDE_SPACES['pid']),
     ControllerKind('se3', 'geometric tracking control on SE(3) (Lee et al.) with integral terms', _se3_family,
-                   SE3Controller.GAINS_SECTION, search_space=SEARCH_SPACES['se3']),
+                   SE3Controller.GAINS_SECTION, search_space=SEARCH_SPACES['se3'],
+                   attitude_space=ATTITUDE_SPACES['se3']),
     ControllerKind('l1-se3', 'se3 with L1 adaptive augmentation (L1Quad)', _se3_family, L1SE3Controller.GAINS_SECTION,
-                   search_space=SEARCH_SPACES['l1-se3']),
+                   search_space=SEARCH_SPACES['l1-se3'],
+                   attitude_space=ATTITUDE_SPACES['l1-se3']),
     ControllerKind('indi', 'incremental nonlinear dynamic inversion (Smeur et al.; Tal & Karaman)', _indi, 'indi',
-                   search_space=SEARCH_SPACES['indi']),
+                   search_space=SEARCH_SPACES['indi'],
+                   attitude_space=ATTITUDE_SPACES['indi']),
     # an ablation reads the nnit2fsmc section and searches its space: tuned alone it gets the NNIT2FSMC's budget
-    *(ControllerKind(name, description, _cascaded(_nnit2fsmc), 'nnit2fsmc', search_space=SEARCH_SPACES['nnit2fsmc'])
+    *(ControllerKind(name, description, _cascaded(_nnit2fsmc), 'nnit2fsmc', search_space=SEARCH_SPACES['nnit2fsmc'],
+                   attitude_space=ATTITUDE_SPACES['nnit2fsmc'])
       for name, description in ABLATIONS.items()),
 )

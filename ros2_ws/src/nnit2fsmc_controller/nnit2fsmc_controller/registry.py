@@ -45,6 +45,7 @@ class ControllerKind:
     gains_section: str               #: the section of the gains file it reads (beside ``common``)
     schema: Mapping[str, Gain] | None = None   #: its section's gains, flattened (None: the packaged file's)
     search_space: tuple[Dimension, ...] = ()   #: what ``run_stack.py tune`` searches
+    attitude_space: tuple[Dimension, ...] = ()   #: what ``tune --attitude`` adds (search_spaces.ATTITUDE_SPACES)
     batched: bool = True             #: steps a batch in one call (False: vehicle by vehicle)
     source: str = 'built in'         #: where it came from (run_stack.py list controllers)
 

@@ -6,7 +6,10 @@ A kind's space is a tuple of :class:`Dimension`: one searched number, the gains 
 their gains (the helix and the campaigns are symmetric in x and y), so one dimension sets both.
 Every kind gets the same number of dimensions (six), chosen in the position loops that the campaigns'
 wind and mass perturbations load (and, for the adaptive kinds, their translational adaptation); the
-attitude loops keep the packaged gains. Each range contains the packaged
+attitude loops keep the packaged gains, unless ``run_stack.py tune --attitude`` adds each kind's roll and pitch
+loop (:data:`ATTITUDE_SPACES`: the gains that set its stiffness, damping and integral action, roll and pitch sharing
+them) for a world whose actuator and rate the packaged attitude loops were not made for (docs/PX4.md: PX4's SIH at
+100 Hz with a 50 ms motor lag). Each range contains the packaged
 value (so the packaged gains can be enqueued as the first trial) and spans it by about a decade on
 a log scale. Adding a built-in kind is one entry of :data:`SEARCH_SPACES`; a user's kind's space comes from its gains
 schema (:mod:`.registry`).
@@ -38,6 +41,19 @@ def _xy(section: str, gain: str, low: float, high: float, unit: str) -> Dimensio
 
 def _z(section: str, gain: str, low: float, high: float, unit: str) -> Dimension:
     return Dimension(f'z.{gain}', (f'{section}.axes.z.{gain}',), low, high, unit)
+
+
+def _rp(section: str, gain: str, low: float, high: float, unit: str) -> Dimension:
+    return Dimension(f'rp.{gain}', (f'{section}.axes.phi.{gain}', f'{section}.axes.theta.{gain}'), low, high, unit)
+
+
+def _attitude_loop(section: str, error: str, integral: str | None, rate: str) -> tuple[Dimension, ...]:
+    """The roll and pitch dimensions of a PID-shaped attitude loop (pid, se3, l1-se3, indi): the same ranges for
+    every such law, a decade and more around the packaged 217.7 /s^2, 435.4 /s^3, 27.21 /s."""
+    return tuple(dimension for dimension in (
+        _rp(section, error, 10.0, 1000.0, '1/s^2'),
+        _rp(section, integral, 5.0, 2000.0, '1/s^3') if integral else None,
+        _rp(section, rate, 2.0, 80.0, '1/s')) if dimension is not None)
 
 
 #: the ranges of a PID-shaped position loop (pid, se3, l1-se3, indi): role -> (x, y range), (z range), unit
@@ -96,19 +112,39 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
 }
 
 
-def search_space(kind: str) -> tuple[Dimension, ...]:
+#: controller kind -> its roll and pitch loop's dimensions, added by ``tune --attitude`` (yaw keeps its gains)
+ATTITUDE_SPACES: dict[str, tuple[Dimension, ...]] = {
+    # the sliding kinds: their own roll and pitch gains (common.lambda, the surfaces' slope, is every sliding
+    # kind's at once, so it stays: one gains file holds every kind's tuned point)
+    'nnit2fsmc': (_rp('nnit2fsmc', 'input_scale', 0.5, 20.0, 'rad/s (S at which the fuzzy input saturates)'),
+                  _rp('nnit2fsmc', 'fuzzy_gain', 10.0, 500.0, 'rad/s^2'),
+                  _rp('nnit2fsmc', 'nn_gain', 2.0, 150.0, 'rad/s^2')),
+    'smc-integral': (_rp('smc_integral', 'slope', 3.0, 100.0, '1/s (boundary-layer slope)'),
+                     _rp('smc_integral', 'integral_gain', 1.0, 100.0, '1/s^2'),
+                     _rp('smc_integral', 'switching_gain', 3.0, 200.0, 'rad/s^2')),
+    'pid': _attitude_loop('pid', 'kp', 'ki', 'kd'),
+    'se3': _attitude_loop('se3', 'k_error', 'k_integral', 'k_rate'),
+    'l1-se3': _attitude_loop('l1_se3', 'k_error', 'k_integral', 'k_rate'),
+    'indi': _attitude_loop('indi', 'k_error', None, 'k_rate'),
+}
+
+
+def search_space(kind: str, attitude: bool = False) -> tuple[Dimension, ...]:
     """The search space of ``kind`` (its :class:`.registry.ControllerKind`'s; a user's kind's from its gains
-    schema); ParameterError if it has none. An ablation of the NNIT2FSMC reads the same ``nnit2fsmc`` section
-    and searches its space: tuned alone (``run_stack.py tune --controller nnit2fsmc-bias``), it gets the
-    NNIT2FSMC's budget, and its point goes to its own gains file (it is not packaged: it would overwrite the
-    NNIT2FSMC's)."""
+    schema), with its roll and pitch loop's dimensions if ``attitude``; ParameterError if it has none. An ablation
+    of the NNIT2FSMC reads the same ``nnit2fsmc`` section and searches its space: tuned alone (``run_stack.py tune
+    --controller nnit2fsmc-bias``), it gets the NNIT2FSMC's budget, and its point goes to its own gains file (it is
+    not packaged: it would overwrite the NNIT2FSMC's)."""
     from .registry import controller_kind
-    space = controller_kind(kind).search_space
-    if not space:
+    entry = controller_kind(kind)
+    if not entry.search_space:
         raise ParameterError(f'--controller: {kind!r} has no search space (a built-in kind declares it in '
                              'nnit2fsmc_controller/search_spaces.py; a user\'s kind gives its gains a finite range, '
                              'docs/CONTROLLERS.md)')
-    return space
+    if attitude and not entry.attitude_space:
+        raise ParameterError(f'--attitude: {kind!r} declares no attitude dimensions (nnit2fsmc_controller/'
+                             'search_spaces.py, ATTITUDE_SPACES)')
+    return entry.search_space + (entry.attitude_space if attitude else ())
 
 
 def _node(tree: Mapping[str, Any], dotted: str) -> tuple[dict, str]:
@@ -124,14 +160,15 @@ def _node(tree: Mapping[str, Any], dotted: str) -> tuple[dict, str]:
     return node, key
 
 
-def values_in(gains: Mapping[str, Any], kind: str) -> dict[str, float]:
-    """The point of ``kind``'s search space that ``gains`` (a gains tree) is: each dimension's value.
+def values_in(gains: Mapping[str, Any], kind: str, attitude: bool = False) -> dict[str, float]:
+    """The point of ``kind``'s search space (with ``attitude``, :func:`search_space`) that ``gains`` (a gains tree)
+    is: each dimension's value.
 
     ParameterError if the gains a dimension ties together differ (such gains are not a point of the
     space), or lie outside its range.
     """
     values = {}
-    for dimension in search_space(kind):
+    for dimension in search_space(kind, attitude):
         found = {float(node[key]) for node, key in (_node(gains, name) for name in dimension.gains)}
         if len(found) != 1:
             raise ParameterError(f'{", ".join(dimension.gains)}: tuning sets them to one value ({dimension.name}); '
@@ -144,10 +181,11 @@ def values_in(gains: Mapping[str, Any], kind: str) -> dict[str, float]:
     return values
 
 
-def with_values(gains: Mapping[str, Any], kind: str, values: Mapping[str, float]) -> dict:
-    """A copy of ``gains`` with every dimension of ``kind``'s space set to ``values[dimension.name]``."""
+def with_values(gains: Mapping[str, Any], kind: str, values: Mapping[str, float], attitude: bool = False) -> dict:
+    """A copy of ``gains`` with every dimension of ``kind``'s space (with ``attitude``, :func:`search_space`) set to
+    ``values[dimension.name]``."""
     tuned = copy.deepcopy(dict(gains))
-    for dimension in search_space(kind):
+    for dimension in search_space(kind, attitude):
         for name in dimension.gains:
             node, key = _node(tuned, name)
             node[key] = float(values[dimension.name])

@@ -55,7 +55,7 @@ from quad_msgs_bridge.timebase import nanoseconds, stamp_fields
 from quad_msgs_bridge.validation import ParameterError
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
-from .px4_offboard import CONTROL_LEVELS, OffboardConfig, OffboardCore, Phase, Px4Status
+from .px4_offboard import CONTROL_LEVELS, TAKEOFFS, OffboardConfig, OffboardCore, Phase, Px4Status
 
 #: [s] the core's timer: heartbeats, timeouts (every message also ticks it)
 TICK_PERIOD = 0.01
@@ -88,7 +88,13 @@ class Px4BridgeNode(Node):
             target_system=declare(self, 'target_system', 1, 'MAV_SYS_ID of PX4 (its instance + 1 in SITL)', (1, 255)),
             initial_position=tuple(float(v) for v in initial),
             initial_yaw=declare(self, 'initial_yaw', 0.0, 'our frame\'s heading of the vehicle at flight time 0 [rad, '
-                                'ENU] (the scenario\'s start)', (-10.0, 10.0)))
+                                'ENU] (the scenario\'s start)', (-10.0, 10.0)),
+            takeoff=declare(self, 'takeoff', 'controller',
+                            'who takes off: controller (ours, from the ground) or px4 (PX4\'s position controller to '
+                            'takeoff_altitude, then our controller from there)', choices=TAKEOFFS),
+            takeoff_altitude=declare(self, 'takeoff_altitude', 2.5,
+                                     'PX4\'s take-off: height above the arming point of the hand-over [m]',
+                                     (0.1, 100.0)))
         try:
             self.core = OffboardCore(params, config)
         except ValueError as error:
@@ -133,7 +139,7 @@ class Px4BridgeNode(Node):
         elif self.level == 'thrust_and_torque':
             self.thrust_pub = px4_pub(m.VehicleThrustSetpoint, px4.PX4_THRUST)
             self.torque_pub = px4_pub(m.VehicleTorqueSetpoint, px4.PX4_TORQUE)
-        else:
+        if self.level == 'position' or config.takeoff == 'px4':
             self.trajectory_pub = px4_pub(m.TrajectorySetpoint, px4.PX4_TRAJECTORY)
         latest = px4_qos(DurabilityPolicy.TRANSIENT_LOCAL)
         self.create_subscription(m.VehicleOdometry, f'{prefix}/fmu/out/vehicle_odometry', self.on_odometry, latest)

@@ -18,22 +18,30 @@ Phases (:class:`Phase`):
    VehicleStatus reports nav_state OFFBOARD, then VEHICLE_CMD_COMPONENT_ARM_DISARM (param1 1) until it reports
    arming_state ARMED, each repeated every ``command_retry`` s, while the heartbeat goes on. Not done within
    ``request_timeout`` s: ``failsafe`` (disarm if armed).
-4. ``flying``: our controller flies from the ground up (the take-off is the first part of its reference). Our
-   ``odom`` is published from here, stamped from 0 at the first sample (flight time, as the simulator's sim time),
-   so the controller starts as it does on the simulator, and no control law winds up on the ground while PX4 is
-   disarmed. Chosen over a take-off under PX4's position controller and a hand-over in the air: the stack compares
-   control laws including their take-off, a hand-over would switch control levels in flight (a transient of its
-   own), and the controller would run unheard (its integrators winding up) until it. The heartbeat now names the
-   control level: ``direct_actuator`` (ActuatorMotors, each rotor's relative thrust F/F_max) or
-   ``thrust_and_torque`` (VehicleThrustSetpoint and VehicleTorqueSetpoint, normalised: quad_msgs_bridge.px4).
-5. ``landing`` (after :meth:`OffboardCore.request_landing`): VEHICLE_CMD_NAV_LAND until nav_state AUTO_LAND, no
+4. ``taking_off`` (``takeoff`` 'px4' only): PX4's own position controller climbs to ``takeoff_altitude`` above the
+   arming point (the heartbeat at the position level, a TrajectorySetpoint holding that point at the arming
+   heading). Once the odometry has been within ``handover_distance`` of it and slower than ``handover_speed`` for
+   ``handover_hold`` s, the flight starts there. Why (docs/PX4.md, "Take-off"): on the ground SIH holds the vehicle
+   level and still while PX4's EKF2 estimate of it wanders (tens of cm, tenths of m/s, its height too), so a
+   controller flying from the ground sees a flight that is not happening, asks moments the ground absorbs, and
+   gets them all at once at lift-off. With ``takeoff`` 'controller' the flight starts at arming instead.
+5. ``flying``: our controller flies (with ``takeoff`` 'controller' from the ground up: the take-off is the first part
+   of its reference). Our ``odom`` is published from here, stamped from 0 at the first sample (flight time, as the
+   simulator's sim time), so the controller starts as it does on the simulator, and no control law winds up before
+   it flies (nothing is published to it until then). The heartbeat names the control level: ``direct_actuator``
+   (ActuatorMotors, each rotor's relative thrust F/F_max) or ``thrust_and_torque`` (VehicleThrustSetpoint and
+   VehicleTorqueSetpoint, normalised: quad_msgs_bridge.px4); after PX4's take-off it changes to that level with
+   the controller's first answer, in the same tick as that answer's setpoint, and holds the take-off point until
+   then.
+6. ``landing`` (after :meth:`OffboardCore.request_landing`): VEHICLE_CMD_NAV_LAND until nav_state AUTO_LAND, no
    more heartbeat; PX4 lands under its own controllers. Once the odometry shows the vehicle back at its take-off
    height (within ``landed_height``) and still (below ``landed_speed``) for ``landed_hold`` s, disarm
    (ARM_DISARM param1 0) until disarmed: ``done``. PX4 also disarms by itself 2 s after it detects the landing
    (COM_DISARM_LAND default 2.0, commander_params.c).
-6. ``failsafe``: when our side fails in flight (no forces for ``forces_timeout`` s after the first ones, or none
-   within ``first_forces_timeout`` s of arming, or odometry stale or invalid), the heartbeat stops and NAV_LAND
-   hands the vehicle to PX4's land mode at once; when PX4 leaves offboard or disarms by itself (its failsafe, a
+7. ``failsafe``: when our side fails in flight (no forces for ``forces_timeout`` s after the first ones, or none
+   within ``first_forces_timeout`` s of the flight's start, or odometry stale or invalid; during PX4's take-off:
+   odometry stale or invalid, or the take-off point not reached in ``takeoff_timeout`` s), the heartbeat stops and
+   NAV_LAND hands the vehicle to PX4's land mode at once; when PX4 leaves offboard or disarms by itself (its failsafe, a
    pilot), nothing is sent: PX4 is in charge. ``done`` once disarmed.
 
 When our controller (or this node) goes quiet without saying so, PX4 acts by itself: COM_OF_LOSS_T (default 1.0 s)
@@ -63,6 +71,9 @@ from quad_msgs_bridge.vehicle_params import VehicleParams
 #: ``position``: our reference as TrajectorySetpoint (position, velocity, acceleration feed-forward, yaw), flown by
 #: PX4's own cascaded position/velocity/attitude/rate controller (run_stack.py --controller px4)
 CONTROL_LEVELS = ('direct_actuator', 'thrust_and_torque', 'position')
+#: who takes off: ``controller`` (ours, from the ground: flight time 0 at arming) or ``px4`` (PX4's position
+#: controller, then a hand-over in the air: flight time 0 there)
+TAKEOFFS = ('controller', 'px4')
 
 # msg/VehicleCommand.msg and msg/VehicleStatus.msg
 VEHICLE_CMD_NAV_LAND = 21
@@ -81,6 +92,7 @@ class Phase(str, Enum):
     WAITING = 'waiting'
     STREAMING = 'streaming'
     REQUESTING = 'requesting'
+    TAKING_OFF = 'taking_off'
     FLYING = 'flying'
     LANDING = 'landing'
     FAILSAFE = 'failsafe'
@@ -155,7 +167,7 @@ class OffboardConfig:
     prearm_stream: float = 1.0         #: heartbeats before asking for offboard
     command_retry: float = 0.5         #: between repeats of an unanswered VehicleCommand
     request_timeout: float = 5.0       #: for PX4 to accept offboard and arm
-    first_forces_timeout: float = 1.0  #: after arming, for the controller's first rotor forces
+    first_forces_timeout: float = 1.0  #: after the flight's start, for the controller's first rotor forces
     forces_timeout: float = 0.1        #: controller silence in flight before PX4's land mode takes over
     landed_height: float = 0.1         #: [m] above the take-off height: on the ground
     landed_speed: float = 0.1          #: [m/s] below: still
@@ -184,10 +196,26 @@ class OffboardConfig:
     #: noise even once settled; the gate keeps out only the runaway before and at its GPS reset)
     still_speed: float = 0.6
     still_distance: float = 0.8            #: [m]
+    takeoff: str = 'controller'            #: TAKEOFFS
+    #: [m] above the arming point, where PX4 takes the vehicle before the hand-over (PX4's own take-off altitude,
+    #: MIS_TAKEOFF_ALT, defaults to 2.5 m: navigator/mission_params.c)
+    takeoff_altitude: float = 2.5
+    #: the hand-over waits until the odometry has been within ``handover_distance`` [m] of the take-off point and
+    #: slower than ``handover_speed`` [m/s] for ``handover_hold`` [s]; loose because PX4's own hold of SIH wanders as
+    #: its estimate does (docs/PX4.md); not there within ``takeoff_timeout`` [s] of arming: PX4 lands
+    handover_distance: float = 0.5
+    handover_speed: float = 0.5
+    handover_hold: float = 1.0
+    takeoff_timeout: float = 30.0
 
     def __post_init__(self):
         if self.control_level not in CONTROL_LEVELS:
             raise ParameterError(f'control_level: {self.control_level!r} is not one of {", ".join(CONTROL_LEVELS)}')
+        if self.takeoff not in TAKEOFFS:
+            raise ParameterError(f'takeoff: {self.takeoff!r} is not one of {", ".join(TAKEOFFS)}')
+        for name in ('takeoff_altitude', 'handover_distance', 'handover_speed', 'takeoff_timeout'):
+            check_number(name, getattr(self, name), 0.0, math.inf, low_inclusive=False)
+        check_number('handover_hold', self.handover_hold, 0.0)
         for name in ('odom_timeout', 'heartbeat_period', 'command_retry', 'request_timeout', 'first_forces_timeout',
                      'forces_timeout', 'landed_height', 'landed_speed'):
             check_number(name, getattr(self, name), 0.0, math.inf, low_inclusive=False)
@@ -233,6 +261,11 @@ class OffboardCore:
         self.waiting_for_checks = False
         self.waiting_for_still = False
         self.still_from: tuple | None = None          #: (since when, where) the odometry has been still
+        #: [m, ENU of PX4's odometry] and [rad] where PX4 takes off to and its heading (``takeoff`` 'px4')
+        self.takeoff_point: tuple | None = None
+        self.takeoff_yaw = 0.0
+        self.near_since: float | None = None          #: since when the vehicle has been at the take-off point
+        self.sent_level: str | None = None            #: the control level the last heartbeat named
         self.failed: str | None = None               #: why the flight ended in a failsafe, if it did
 
     # --- inputs ---------------------------------------------------------------------------------------------
@@ -274,9 +307,20 @@ class OffboardCore:
             self.config.odom_timeout
 
     # --- outputs --------------------------------------------------------------------------------------------
+    def _holding(self) -> bool:
+        """True while PX4 flies to or holds the take-off point (``takeoff`` 'px4': until the controller's first
+        answer after the hand-over)."""
+        return self.phase == Phase.TAKING_OFF or (self.phase == Phase.FLYING and self.takeoff_point is not None
+                                                 and self.forces is None)
+
+    def _level(self) -> str:
+        """The control level the heartbeat names now."""
+        return 'position' if self._holding() else self.config.control_level
+
     def _mode(self, now: float) -> OffboardMode:
         """The heartbeat, naming the control level from the first one (PX4's offboard check wants some flag set)."""
-        level = self.config.control_level
+        level = self._level()
+        self.sent_level = level
         if level == 'position':
             return OffboardMode(_us(now), position=True, velocity=True, acceleration=True)
         return OffboardMode(_us(now), thrust_and_torque=level == 'thrust_and_torque',
@@ -284,7 +328,10 @@ class OffboardCore:
 
     def _setpoint(self, now: float, forces: tuple | None) -> Setpoint:
         """The level's setpoint of rotor forces [N] (None: idle, zero thrust); at the ``position`` level of the
-        reference (None: hold where the vehicle is, at its heading)."""
+        reference (None: hold where the vehicle is, at its heading); while PX4 takes off, its take-off point."""
+        if self._holding():
+            return Setpoint(_us(now), trajectory=px4.trajectory_setpoint(self.takeoff_point, (0.0,) * 3, (0.0,) * 3,
+                                                                         self.takeoff_yaw, 0.0))
         if self.config.control_level == 'position':
             return Setpoint(_us(now), trajectory=self._trajectory(forces))
         if self.config.control_level == 'direct_actuator':
@@ -349,7 +396,8 @@ class OffboardCore:
         step = getattr(self, f'_{self.phase.value}')
         heartbeat = step(now, events, commands, new_forces)
         if heartbeat:
-            due = now - self.last_heartbeat >= self.config.heartbeat_period
+            # a change of control level (the hand-over's first answer) goes out at once, with its setpoint
+            due = now - self.last_heartbeat >= self.config.heartbeat_period or self._level() != self.sent_level
             flying = self.phase == Phase.FLYING
             if due:
                 mode = self._mode(now)
@@ -441,18 +489,60 @@ class OffboardCore:
         elif status.arming_state != ARMING_STATE_ARMED:
             commands.append(self._command(now, VEHICLE_CMD_COMPONENT_ARM_DISARM, 1.0))
         else:
-            self._enter(now, Phase.FLYING, events, 'PX4 is in offboard and armed: our controller flies')
-            self.flight_origin_us, self.ground_z, self.publish_origin = self.odometry_us, self.state[2], True
-            self.origin = tuple(self.state[0:3])
-            self.turn = self.config.initial_yaw - self.state[8]
-            self.forces = None        # forces from before the flight are not flown
+            self.ground_z = self.state[2]
+            if self.config.takeoff == 'px4':
+                self.takeoff_point = (*self.state[0:2], self.state[2] + self.config.takeoff_altitude)
+                self.takeoff_yaw = self.state[8]
+                self._enter(now, Phase.TAKING_OFF, events, f'PX4 is in offboard and armed: PX4 takes off to '
+                            f'{self.config.takeoff_altitude:g} m')
+            else:
+                self._start_flight(now, events, 'PX4 is in offboard and armed: our controller flies')
         return True
 
-    def _flying(self, now, events, commands, new_forces) -> bool:
+    def _start_flight(self, now: float, events: list, why: str) -> None:
+        """Flight time 0: our frame's origin here, our ``odom`` from this sample on."""
+        self._enter(now, Phase.FLYING, events, why)
+        self.flight_origin_us, self.publish_origin = self.odometry_us, True
+        self.origin = tuple(self.state[0:3])
+        self.turn = self.config.initial_yaw - self.state[8]
+        self.forces = None        # forces from before the flight are not flown
+
+    def _in_offboard(self, now: float, events: list) -> bool:
+        """False (and ``failsafe``) if PX4 has left offboard or disarmed by itself."""
         status = self.status
         if status.arming_state != ARMING_STATE_ARMED or status.nav_state != NAVIGATION_STATE_OFFBOARD:
             self._fail(now, events, f'PX4 left offboard by itself (arming_state {status.arming_state}, nav_state '
                        f'{status.nav_state}): PX4 is in charge', None)
+            return False
+        return True
+
+    def _taking_off(self, now, events, commands, new_forces) -> bool:
+        c = self.config
+        if not self._in_offboard(now, events):
+            return False
+        if self.landing_requested:
+            self._enter(now, Phase.LANDING, events, 'landing requested during the take-off: PX4 lands')
+            return self._landing(now, events, commands, new_forces)
+        if not self.odometry_fresh(now):
+            why = 'odometry invalid' if self.odometry_rejected else f'odometry older than {c.odom_timeout} s'
+            self._fail(now, events, f'{why} during the take-off: PX4 lands', VEHICLE_CMD_NAV_LAND)
+            return self._failsafe(now, events, commands, new_forces)
+        if now - self.since > c.takeoff_timeout:
+            self._fail(now, events, f'PX4 did not reach the take-off point within {c.takeoff_timeout:g} s: PX4 lands',
+                       VEHICLE_CMD_NAV_LAND)
+            return self._failsafe(now, events, commands, new_forces)
+        near = (math.dist(self.state[0:3], self.takeoff_point) <= c.handover_distance
+                and math.sqrt(sum(v * v for v in self.state[3:6])) <= c.handover_speed)
+        if not near:
+            self.near_since = None
+        elif self.near_since is None:
+            self.near_since = now
+        if near and now - self.near_since >= c.handover_hold:
+            self._start_flight(now, events, f'at the take-off point for {c.handover_hold:g} s: our controller flies')
+        return True
+
+    def _flying(self, now, events, commands, new_forces) -> bool:
+        if not self._in_offboard(now, events):
             return False
         if self.landing_requested:
             self._enter(now, Phase.LANDING, events, 'landing requested: PX4 lands')
@@ -462,8 +552,8 @@ class OffboardCore:
             self._fail(now, events, f'{why}: PX4 lands', VEHICLE_CMD_NAV_LAND)
             return self._failsafe(now, events, commands, new_forces)
         if self.forces is None and now - self.since > self.config.first_forces_timeout:
-            self._fail(now, events, f'no rotor forces within {self.config.first_forces_timeout} s of arming: PX4 '
-                       'lands', VEHICLE_CMD_NAV_LAND)
+            self._fail(now, events, f'no rotor forces within {self.config.first_forces_timeout} s of the flight\'s '
+                       'start: PX4 lands', VEHICLE_CMD_NAV_LAND)
             return self._failsafe(now, events, commands, new_forces)
         if self.forces is not None and now - self.forces_arrival > self.config.forces_timeout:
             self._fail(now, events, f'no rotor forces for {self.config.forces_timeout} s: PX4 lands',
