@@ -64,8 +64,10 @@ def package(root: Path, kinds, into: Path) -> list[str]:
             raise ParameterError(f'{picked}: missing (run the tune of docs/PX4.md for {kind} into {root / kind})')
         point = values_in(load_gains(picked, kind=kind), kind, attitude=True)
         values.update({gain: point[d.name] for d in search_space(kind, attitude=True) for gain in d.gains})
-        header = picked.read_text().split('\n', 1)[0].lstrip('# ')
-        report.append(f'{kind}: {header}: ' + ', '.join(f'{name} = {value:.4g}' for name, value in point.items()))
+        # the tune's own words: trial, objective, median, p95 and the flights it finished (below 99 %: no trial
+        # finished 99 % of its flights, and the pick is the penalised ranking's)
+        header = ' '.join(line.lstrip('# ') for line in picked.read_text().split('\n')[:2])
+        report.append(f'{kind}: {header} Point: ' + ', '.join(f'{name} = {value:.4g}' for name, value in point.items()))
     text = HEADER + ''.join(f'# {line}\n' for line in report) + _body(DEFAULT_CONTROLLER_FILE.read_text())
     text = set_in_text(text, values)
     with tempfile.TemporaryDirectory() as folder:
