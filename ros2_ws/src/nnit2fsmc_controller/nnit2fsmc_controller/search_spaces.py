@@ -80,7 +80,8 @@ SEARCH_SPACES: dict[str, tuple[Dimension, ...]] = {
         _xy('nnit2fsmc', 'fuzzy_gain', 2.0, 40.0, 'm/s^2'),
         _xy('nnit2fsmc', 'nn_gain', 1.0, 20.0, 'm/s^2'),
         _xy('nnit2fsmc', 'learning_rate', 0.1, 10.0, '1/s per (m/s^2)^2'),
-        _z('nnit2fsmc', 'fuzzy_gain', 4.0, 80.0, 'm/s^2'),
+        # above g: per unit of mass, a z fuzzy gain below g cannot hold the vehicle in hover (refused when built)
+        _z('nnit2fsmc', 'fuzzy_gain', 10.0, 80.0, 'm/s^2'),
         _z('nnit2fsmc', 'learning_rate', 0.01, 1.0, '1/s per (m/s^2)^2'),
     ),
     'pid': _position_loop('pid', 'kp', 'ki', 'kd'),
