@@ -51,13 +51,18 @@ def test_package_refuses_a_kind_without_its_pick_and_leaves_the_file_alone(tmp_p
 
 def test_a_row_counts_the_runs_that_flew_to_the_end_and_says_why_the_others_ended():
     flew = {'rmse_position_m': 0.02, 'max_position_error_m': 0.05, 'chattering_force_n_per_s': 1.5,
-            'chattering_moment_nm_per_s': 0.5, 'saturation_fraction': 0.0, 'failure': None, 'ended_early': False}
+            'chattering_moment_nm_per_s': 0.5, 'saturation_fraction': 0.0, 'failure': None, 'failures': [],
+            'flight_ok': True}
     better = {**flew, 'rmse_position_m': 0.01, 'max_position_error_m': 0.03}
     crashed = {**flew, 'failure': 'PX4 failsafe: PX4 left offboard by itself', 'failure_time_s': 3.25,
-               'ended_early': True}
-    row = px4_sih.row('PX4 SIH', 'se3', [flew, crashed, better])
-    assert row == ('| PX4 SIH | se3 | 3 | 2 | 1: PX4 failsafe: PX4 left offboard by itself at 3.2 s | 1.5 (1.0-2.0) '
-                   '| 4.0 (3.0-5.0) | 1.50 (1.50-1.50) | 0.50 (0.50-0.50) | 0.0 (0.0-0.0) |')
+               'flight_ok': False}
+    strayed = {**flew, 'rmse_position_m': 2.0, 'max_position_error_m': 3.0, 'flight_ok': False,
+               'failures': ['max position error 3.000 m exceeds --max-error 1 m']}
+    later = {**crashed, 'failure_time_s': 4.5}
+    row = px4_sih.row('PX4 SIH', 'se3', [flew, crashed, better, strayed, later])
+    assert row == ('| PX4 SIH | se3 | 5 | 2 | 2: PX4 failsafe: PX4 left offboard by itself at 3.2-4.5 s; 1: max position '
+                   'error above 1 m | 1.5 (1.0-2.0) | 4.0 (3.0-5.0) | 1.50 (1.50-1.50) | 0.50 (0.50-0.50) '
+                   '| 0.0 (0.0-0.0) |')
     own = {**flew, 'not_measured': ['chattering', 'saturation']}
     assert px4_sih.row('PX4 SIH', 'px4', [own]).endswith('| 2.0 | 5.0 | n/a | n/a | n/a |')
     assert px4_sih.row('PX4 SIH', 'pid', [crashed]).endswith('| n/a | n/a | n/a | n/a | n/a |')
