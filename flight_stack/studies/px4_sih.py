@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import statistics
 import subprocess
 import sys
@@ -101,7 +102,8 @@ def px4_command(kind: str, scenario: str, hover_duration: float, out: Path) -> l
 
 
 def fly_px4(task) -> dict:
-    """One PX4 SITL flight (its summary; flown only if DIR has none)."""
+    """One PX4 SITL flight (its summary; flown only if DIR has none); a failed one's summary gets when its bag
+    first shows the vehicle tilted past :data:`FLIPPED_TILT` (``tilted_s``; None: never)."""
     command, out = task
     summary = out / 'summary.json'
     if not summary.is_file():
@@ -109,7 +111,25 @@ def fly_px4(task) -> dict:
                        check=False)
     if not summary.is_file():
         return {'failure': f'no summary (run it alone: {" ".join(command)})', 'flight_ok': False}
-    return json.loads(summary.read_text())
+    result = json.loads(summary.read_text())
+    if not result.get('flight_ok') and (out / 'bag').exists():
+        result['tilted_s'] = tilted_at(out / 'bag')
+    return result
+
+
+FLIPPED_TILT_DEG = 60.0           #: [deg] tilt past which a PX4 flight is said to have flipped
+FLIPPED_TILT = math.radians(FLIPPED_TILT_DEG)
+
+
+def tilted_at(bag: Path) -> float | None:
+    """The first flight time [s] at which the bag's odometry shows the vehicle tilted past FLIPPED_TILT (roll
+    and pitch: the angle between its body z and the vertical), None if never."""
+    import numpy as np
+    from quad_msgs_bridge.review.flight_from_bag import read_flight
+    flight = read_flight(bag, vehicle_file=VEHICLE)
+    phi, theta = flight.state[:, 6], flight.state[:, 7]
+    over = np.flatnonzero(np.arccos(np.clip(np.cos(phi) * np.cos(theta), -1.0, 1.0)) > FLIPPED_TILT)
+    return float(flight.time[over[0]]) if over.size else None
 
 
 def fly_ours(kind: str, scenario: str, hover_duration: float, delay: float) -> dict:
@@ -128,6 +148,8 @@ def failed(summary: dict) -> tuple[str, float | None] | None:
         return None
     if summary.get('failure'):
         return summary['failure'], summary.get('failure_time_s')
+    if summary.get('tilted_s') is not None:
+        return f'tilted past {FLIPPED_TILT_DEG:g} deg (flipped)', summary['tilted_s']
     failures = summary.get('failures') or ['failed']
     if all(text.startswith('max position error') for text in failures):
         return 'max position error above 1 m', None
