@@ -63,7 +63,8 @@ def test_every_kind_has_roll_and_pitch_dimensions_that_hold_the_packaged_gains(k
     values inside the ranges, and a point of it flies (builds) with both axes set."""
     gains = load_gains()
     whole = search_space(kind, attitude=True)
-    assert whole[:len(search_space(kind))] == search_space(kind) and whole[len(search_space(kind)):] == ATTITUDE_SPACES[kind]
+    position = search_space(kind)
+    assert whole[:len(position)] == position and whole[len(position):] == ATTITUDE_SPACES[kind]
     added = ATTITUDE_SPACES[kind]
     assert 2 <= len(added) <= 3 and all(d.name.startswith('rp.') for d in added)
     assert all(len(d.gains) == 2 and d.gains[0].replace('phi', 'theta') == d.gains[1] for d in added)

@@ -205,7 +205,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument('--repeats', type=int, default=5, help='PX4 SITL flights per kind and scenario (default 5)')
     p.add_argument('--hover-duration', type=float, default=20.0, help='[s] of the hover (default 20)')
     p.add_argument('--delay', type=float, default=0.02,
-                   help='[s] transport delay of our plant\'s flights (default 0.02: the middle of the tuning\'s)')
+                   help='[s] transport delay of our plant\'s flights (default 0.02: the tuning world\'s largest)')
     p.add_argument('--jobs', type=int, default=2, help='PX4 SITL flights at a time (default 2)')
 
 
@@ -239,8 +239,8 @@ def run(args: argparse.Namespace) -> int:
              'over the finished runs; PX4\'s own chattering and saturation are not on uXRCE-DDS (n/a).']
     for scenario in scenarios:
         lines += ['', f'**{scenario}**', '',
-                  '| plant | kind | runs | finished | why the others failed | RMSE [cm] | max error [cm] | chattering U1 '
-                  '| chattering moments | rotor saturation [%] |', '|---|---|---|---|---|---|---|---|---|---|']
+                  '| plant | kind | runs | finished | why the others failed | RMSE [cm] | max error [cm] '
+                  '| chattering U1 | chattering moments | rotor saturation [%] |', '|---|---|---|---|---|---|---|---|---|---|']
         lines += [row('PX4 SIH', kind, results[(scenario, kind)]) for kind in [*kinds, PX4_OWN]]
         for kind in kinds:
             progress(STUDY, f'our plant: {kind}, {scenario}')
