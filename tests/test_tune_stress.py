@@ -23,7 +23,8 @@ from flight_stack.campaign.stress import (KINDS, BreakingPoint, StressSetup, Tal
                                           write_tries)
 from flight_stack.campaign.tune import TuneSetup, objective, tune
 from nnit2fsmc_controller.factory import build_controller, load_gains
-from nnit2fsmc_controller.search_spaces import ATTITUDE_SPACES, SEARCH_SPACES, search_space, values_in, with_values
+from nnit2fsmc_controller.search_spaces import (ATTITUDE_SPACES, SEARCH_SPACES, Dimension, at_bounds, search_space,
+                                                values_in, with_values)
 from quad_msgs_bridge.validation import ParameterError
 from quad_msgs_bridge.vehicle_params import load_vehicle_file
 
@@ -86,6 +87,17 @@ def test_every_bound_of_every_range_is_gains_the_kind_accepts(kind):
     for dimension in search_space(kind, attitude=True):
         for bound in (dimension.low, dimension.high):
             build_controller(kind, params, with_values(gains, kind, {**start, dimension.name: bound}, True))
+
+
+def test_a_pick_within_2_percent_of_a_bound_of_its_range_sits_at_that_bound():
+    """The ranges rule's test (docs/TUNING.md): 2 % of the range, of its log where the dimension is log-sampled."""
+    log = Dimension('a', ('x.a',), 1.0, 100.0, '-')              # log range 0..ln 100: 2 % is a factor 100^0.02
+    linear = Dimension('b', ('x.b',), 0.0, 10.0, '-', log=False)
+    inside = 100.0 ** 0.021
+    assert at_bounds({'a': 100.0 ** 0.019, 'b': 9.81}, (log, linear)) == [('a', 'low'), ('b', 'high')]
+    assert at_bounds({'a': inside, 'b': 0.21}, (log, linear)) == []
+    assert at_bounds({'a': 100.0 / inside, 'b': 9.79}, (log, linear)) == []
+    assert at_bounds({'a': 100.0, 'b': 0.0}, (log, linear)) == [('a', 'high'), ('b', 'low')]
 
 
 def test_no_two_kinds_tune_the_same_gain_so_every_tuned_point_fits_one_gains_file():
@@ -182,6 +194,8 @@ def test_tune_writes_gains_no_worse_than_the_start_on_the_same_flights_and_resum
     assert (out / 'gains-pid-median.yaml').read_text().split('\n', 1)[1] == gains_file.read_text().split('\n', 1)[1]
     tail = min((row for row in table if row['state'] == 'complete'), key=lambda row: float(row['p95_rmse_m']))
     assert first.picks['p95'][:2] == (int(tail['trial']), pytest.approx(float(tail['p95_rmse_m'])))
+    assert first.picks['p95'][3] == at_bounds({name: float(tail[name]) for name in values_in(gains, 'pid')},
+                                              search_space('pid'))
     tail_gains = load_gains(out / 'gains-pid-p95.yaml')
     assert values_in(tail_gains, 'pid') == pytest.approx({name: float(tail[name]) for name in values_in(gains, 'pid')})
 

@@ -94,8 +94,9 @@ def tune_main(argv: list[str]) -> int:
         return 130
     print(f'best: trial {outcome.best_trial}, objective ({setup.objective}) {outcome.best_objective_m * 100:.3f} cm '
           f'(starting gains: {outcome.starting_objective_m * 100:.3f} cm), {outcome.trials} trials')
-    for statistic, (trial, value, path) in outcome.picks.items():
-        print(f'pick by {statistic}: trial {trial}, {value * 100:.3f} cm: {path}')
+    for statistic, (trial, value, path, bounds) in outcome.picks.items():
+        print(f'pick by {statistic}: trial {trial}, {value * 100:.3f} cm: {path}; at a bound of its range: '
+              + (', '.join(f'{name} ({side})' for name, side in bounds) or 'none'))
     print(f'gains: {outcome.gains_path}\ntrials: {outcome.table_path}')
     return 0
 

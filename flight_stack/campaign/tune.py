@@ -35,7 +35,7 @@ import numpy as np
 import yaml
 
 from nnit2fsmc_controller.factory import load_gains
-from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values
+from nnit2fsmc_controller.search_spaces import at_bounds, search_space, values_in, with_values
 from quad_msgs_bridge.validation import ParameterError
 
 from ..locking import FileLock
@@ -388,7 +388,9 @@ class TuneOutcome:
     trials: int
     gains_path: Path
     table_path: Path
-    picks: dict = None      #: {statistic: (trial number, its value [m], gains path)} (:func:`picks`)
+    #: {statistic: (trial number, its value [m], gains path, the dimensions at a bound of their range:
+    #: search_spaces.at_bounds)} (:func:`picks`)
+    picks: dict = None
 
 
 def tune(setup: TuneSetup, progress: bool = True) -> TuneOutcome:
@@ -430,7 +432,7 @@ def tune(setup: TuneSetup, progress: bool = True) -> TuneOutcome:
         table = write_trials_table(study, setup)
         gains = write_gains(study, setup)
         chosen = {statistic: (trial.number, pick_value(trial.user_attrs, statistic, setup.spec.max_error_m),
-                              write_gains(study, setup, trial, f'-{statistic}'))
+                              write_gains(study, setup, trial, f'-{statistic}'), at_bounds(trial.params, setup.space()))
                   for statistic, trial in picks(study, setup).items()}
     return TuneOutcome(study.best_trial.number, study.best_value, starting[0].value if starting else math.nan,
                        len(study.trials), gains, table, chosen)

@@ -17,6 +17,7 @@ schema (:mod:`.registry`).
 from __future__ import annotations
 
 import copy
+import math
 from dataclasses import dataclass
 from typing import Any, Mapping
 
@@ -146,6 +147,25 @@ def search_space(kind: str, attitude: bool = False) -> tuple[Dimension, ...]:
         raise ParameterError(f'--attitude: {kind!r} declares no attitude dimensions (nnit2fsmc_controller/'
                              'search_spaces.py, ATTITUDE_SPACES)')
     return entry.search_space + (entry.attitude_space if attitude else ())
+
+
+#: a value this close to a bound of its dimension's range (a fraction of the range, of its log where the dimension is
+#: sampled on a log scale) sits at that bound: the ranges rule of docs/TUNING.md widens such a range and searches on
+BOUND_MARGIN = 0.02
+
+
+def at_bounds(point: Mapping[str, float], dimensions) -> list[tuple[str, str]]:
+    """(dimension name, 'low' or 'high') for each of ``dimensions`` whose value in ``point`` sits within
+    BOUND_MARGIN of that bound of its range."""
+    found = []
+    for d in dimensions:
+        scale = math.log if d.log else (lambda x: x)
+        share = (scale(point[d.name]) - scale(d.low)) / (scale(d.high) - scale(d.low))
+        if share <= BOUND_MARGIN:
+            found.append((d.name, 'low'))
+        elif share >= 1.0 - BOUND_MARGIN:
+            found.append((d.name, 'high'))
+    return found
 
 
 def _node(tree: Mapping[str, Any], dotted: str) -> tuple[dict, str]:
