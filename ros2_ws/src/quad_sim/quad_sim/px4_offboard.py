@@ -302,6 +302,14 @@ class OffboardCore:
         self.forces, self.forces_arrival = values, now
         return True
 
+    def speed(self) -> float:
+        """[m/s] of the latest odometry."""
+        return math.sqrt(sum(v * v for v in self.state[3:6]))
+
+    def _odometry_problem(self) -> str:
+        """Why the odometry is not fresh and valid, for an event."""
+        return 'odometry invalid' if self.odometry_rejected else f'odometry older than {self.config.odom_timeout} s'
+
     def odometry_fresh(self, now: float) -> bool:
         return self.state is not None and not self.odometry_rejected and now - self.odometry_arrival <= \
             self.config.odom_timeout
@@ -434,7 +442,7 @@ class OffboardCore:
                 self._enter(now, Phase.DONE, events, 'landing requested before the flight')
             return False
         if not self.odometry_fresh(now):
-            why = 'odometry invalid' if self.odometry_rejected else f'odometry older than {self.config.odom_timeout} s'
+            why = self._odometry_problem()
             if self._armed():
                 self._fail(now, events, f'{why}: disarming', VEHICLE_CMD_COMPONENT_ARM_DISARM)
             else:
@@ -461,7 +469,7 @@ class OffboardCore:
     def _settled(self, now: float, events: list) -> bool:
         """True once the odometry has been still for ``settle_time`` s (config), the window restarting on a move."""
         c = self.config
-        speed = math.sqrt(sum(v * v for v in self.state[3:6]))
+        speed = self.speed()
         if self.still_from is not None:
             moved = math.dist(self.state[0:3], self.still_from[1])
             if speed > c.still_speed or moved > c.still_distance:
@@ -507,32 +515,34 @@ class OffboardCore:
         self.turn = self.config.initial_yaw - self.state[8]
         self.forces = None        # forces from before the flight are not flown
 
-    def _in_offboard(self, now: float, events: list) -> bool:
-        """False (and ``failsafe``) if PX4 has left offboard or disarmed by itself."""
+    def _airborne_checks(self, now, events, commands, new_forces, during: str = '') -> bool | None:
+        """What every phase armed in offboard checks first (``during``: words for its events): PX4 left offboard or
+        disarmed (``failsafe``, PX4 in charge), a landing requested (``landing``), the odometry stale or invalid
+        (``failsafe``, PX4 lands). None if the phase goes on; else what its tick returns."""
         status = self.status
         if status.arming_state != ARMING_STATE_ARMED or status.nav_state != NAVIGATION_STATE_OFFBOARD:
             self._fail(now, events, f'PX4 left offboard by itself (arming_state {status.arming_state}, nav_state '
                        f'{status.nav_state}): PX4 is in charge', None)
             return False
-        return True
+        if self.landing_requested:
+            self._enter(now, Phase.LANDING, events, f'landing requested{during}: PX4 lands')
+            return self._landing(now, events, commands, new_forces)
+        if not self.odometry_fresh(now):
+            self._fail(now, events, f'{self._odometry_problem()}{during}: PX4 lands', VEHICLE_CMD_NAV_LAND)
+            return self._failsafe(now, events, commands, new_forces)
+        return None
 
     def _taking_off(self, now, events, commands, new_forces) -> bool:
         c = self.config
-        if not self._in_offboard(now, events):
-            return False
-        if self.landing_requested:
-            self._enter(now, Phase.LANDING, events, 'landing requested during the take-off: PX4 lands')
-            return self._landing(now, events, commands, new_forces)
-        if not self.odometry_fresh(now):
-            why = 'odometry invalid' if self.odometry_rejected else f'odometry older than {c.odom_timeout} s'
-            self._fail(now, events, f'{why} during the take-off: PX4 lands', VEHICLE_CMD_NAV_LAND)
-            return self._failsafe(now, events, commands, new_forces)
+        ended = self._airborne_checks(now, events, commands, new_forces, ' during the take-off')
+        if ended is not None:
+            return ended
         if now - self.since > c.takeoff_timeout:
             self._fail(now, events, f'PX4 did not reach the take-off point within {c.takeoff_timeout:g} s: PX4 lands',
                        VEHICLE_CMD_NAV_LAND)
             return self._failsafe(now, events, commands, new_forces)
         near = (math.dist(self.state[0:3], self.takeoff_point) <= c.handover_distance
-                and math.sqrt(sum(v * v for v in self.state[3:6])) <= c.handover_speed)
+                and self.speed() <= c.handover_speed)
         if not near:
             self.near_since = None
         elif self.near_since is None:
@@ -542,15 +552,9 @@ class OffboardCore:
         return True
 
     def _flying(self, now, events, commands, new_forces) -> bool:
-        if not self._in_offboard(now, events):
-            return False
-        if self.landing_requested:
-            self._enter(now, Phase.LANDING, events, 'landing requested: PX4 lands')
-            return self._landing(now, events, commands, new_forces)
-        if not self.odometry_fresh(now):
-            why = 'odometry invalid' if self.odometry_rejected else f'odometry older than {self.config.odom_timeout} s'
-            self._fail(now, events, f'{why}: PX4 lands', VEHICLE_CMD_NAV_LAND)
-            return self._failsafe(now, events, commands, new_forces)
+        ended = self._airborne_checks(now, events, commands, new_forces)
+        if ended is not None:
+            return ended
         if self.forces is None and now - self.since > self.config.first_forces_timeout:
             self._fail(now, events, f'no rotor forces within {self.config.first_forces_timeout} s of the flight\'s '
                        'start: PX4 lands', VEHICLE_CMD_NAV_LAND)
@@ -565,7 +569,7 @@ class OffboardCore:
         """On the ground and still for ``landed_hold`` s (from the odometry)."""
         c = self.config
         on_ground = (self.state is not None and self.state[2] - self.ground_z <= c.landed_height
-                     and math.sqrt(sum(v * v for v in self.state[3:6])) <= c.landed_speed)
+                     and self.speed() <= c.landed_speed)
         if not on_ground:
             self.still_since = None
             return False
