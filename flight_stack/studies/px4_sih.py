@@ -27,7 +27,6 @@ import math
 import statistics
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE, flatten_gains, load_gains, shipped_gains
@@ -57,7 +56,7 @@ def package(root: Path, kinds, into: Path) -> list[str]:
     """Write the complete gains file ``into``: the packaged one with each kind's point of its position and attitude
     space (``tune --attitude``) from ``root/KIND/gains-KIND-p95.yaml`` and ``common.control_rate`` 100 Hz, comments
     and layout kept; checked to change exactly those gains. The lines saying each kind's point."""
-    from .scoreboard import set_in_text
+    from .scoreboard import set_in_text, write_checked
     values, report = {'common.control_rate': CONTROL_RATE}, []
     for kind in kinds:
         picked = root / kind / f'gains-{kind}-p95.yaml'
@@ -70,14 +69,7 @@ def package(root: Path, kinds, into: Path) -> list[str]:
         header = ' '.join(line.lstrip('# ') for line in picked.read_text().split('\n')[:2])
         report.append(f'{kind}: {header} Point: ' + ', '.join(f'{name} = {value:.4g}' for name, value in point.items()))
     text = HEADER + ''.join(f'# {line}\n' for line in report) + _body(DEFAULT_CONTROLLER_FILE.read_text())
-    text = set_in_text(text, values)
-    with tempfile.TemporaryDirectory() as folder:
-        check = Path(folder) / 'gains.yaml'
-        check.write_text(text)
-        expected = {**flatten_gains(load_gains(None)), **values}
-        if flatten_gains(load_gains(check)) != expected:
-            raise ParameterError(f'{into}: writing the tuned points changed more than they hold (refused, unchanged)')
-    into.write_text(text)
+    write_checked(into, set_in_text(text, values), {**flatten_gains(load_gains(None)), **values})
     return report
 
 

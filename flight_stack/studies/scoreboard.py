@@ -202,15 +202,21 @@ def package(root: Path, kinds, into: Path, trials_to: Path | None,
     provenance.update({kind: PROVENANCE + line for kind, line in zip(kinds, report)})
     ordered = [provenance.pop(kind) for kind in KINDS if kind in provenance] + list(provenance.values())
     text = '\n'.join(ordered + [line for line in lines if not line.startswith(PROVENANCE)])
+    for kind in kinds:
+        values_in(expected, kind)
+    write_checked(into, text, flatten_gains(expected))
+    return report
+
+
+def write_checked(into: Path, text: str, expected: dict) -> None:
+    """Write the gains file ``text`` to ``into`` if its gains, flattened, are ``expected``; else ParameterError, and
+    ``into`` is left as it was."""
     with tempfile.TemporaryDirectory() as folder:
         check = Path(folder) / 'gains.yaml'
         check.write_text(text)
-        if flatten_gains(load_gains(check)) != flatten_gains(expected):
+        if flatten_gains(load_gains(check)) != expected:
             raise ParameterError(f'{into}: writing the tuned points changed more than they hold (refused, unchanged)')
-    for kind in kinds:
-        values_in(expected, kind)
     into.write_text(text)
-    return report
 
 
 # --- 2. run: the flights -------------------------------------------------------------------------------------
