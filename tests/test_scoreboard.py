@@ -240,6 +240,38 @@ def test_package_takes_the_best_trial_that_passes_the_acceptance_and_says_which_
     assert values_in(load_gains(into), 'pid') == pytest.approx(second)         # a refusal leaves it unchanged
 
 
+def test_package_by_median_or_p95_takes_that_statistics_pick_under_the_99_percent_rule(tmp_path):
+    """``--pick``: the trials flown on every seed that finished 99 %, by the statistic; as ``tune`` picks."""
+    space = search_space('pid')
+    points = [{d.name: d.low + (d.high - d.low) * f for d in space} for f in (0.1, 0.3, 0.5, 0.7, 0.9)]
+    rows = [  # trial, state, objective (p95), median, p95, finished, flights, seeds flown
+        (0, 'complete', 0.030, 0.020, 0.030, 100, 100, 2),      # the p95 pick
+        (1, 'complete', 0.040, 0.015, 0.040, 99, 100, 2),       # the median pick
+        (2, 'complete', 1.020, 0.010, 1.000, 98, 100, 2),       # the lowest median, below 99 % finished
+        (3, 'pruned', 0.010, 0.005, 0.010, 50, 50, 1),          # one seed only
+        (4, 'complete', 2.000, 'nan', 'nan', '', '', 0)]        # refused gains
+    (tmp_path / 'tune-pid').mkdir()
+    with (tmp_path / 'tune-pid' / 'trials-pid.csv').open('w', newline='') as stream:
+        writer = csv.writer(stream)
+        writer.writerow(['trial', 'state', 'objective_m', 'median_rmse_m', 'p95_rmse_m', 'finished', 'flights',
+                         'seeds_flown', *(d.name for d in space)])
+        for row, point in zip(rows, points):
+            writer.writerow([*row, *(point[d.name] for d in space)])
+    trials = tmp_path / 'tune-pid' / 'trials-pid.csv'
+    assert [r['trial'] for _, r in scoreboard.ranked_points(trials, 'pid', 'median')] == ['1', '0', '2']
+    assert [r['trial'] for _, r in scoreboard.ranked_points(trials, 'pid', 'p95')] == ['0', '1', '2']
+    into = tmp_path / 'controller.yaml'
+    into.write_text(DEFAULT_CONTROLLER_FILE.read_text())
+    report = scoreboard.package(tmp_path, ('pid',), into, None, accept=accept_every, pick='median')
+    assert values_in(load_gains(into), 'pid') == pytest.approx(points[1])
+    assert report[0].startswith('pid: trial 1, median 1.500 cm (99/100 finished)')
+    with pytest.raises(ParameterError, match='--pick'):
+        scoreboard.ranked_points(trials, 'pid', 'mean')
+    write_trials(tmp_path / 'old', 'pid', [('complete', 0.02, points[0])])       # a table before the statistics
+    with pytest.raises(ParameterError, match='no column p95_rmse_m'):
+        scoreboard.ranked_points(tmp_path / 'old' / 'tune-pid' / 'trials-pid.csv', 'pid', 'p95')
+
+
 def test_the_hover_acceptance_refuses_the_se3_point_that_flips_on_the_take_off_step():
     """The second round's best se3 trial (docs/tuning/2026-12-05, trial 12) flips on the 1 m take-off step
     of the paper's vehicle; the packaged se3 point (its best trial that does not) holds every vehicle."""

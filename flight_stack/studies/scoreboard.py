@@ -15,9 +15,9 @@ its nominal, noise and delay-margin figures.
 ``run`` flies, with one gains file (default: the packaged one, which after ``package`` holds every kind's
 tuned gains; they do not collide, tests/test_tune_stress.py):
 
-* **held out**: ``SPEC`` (default campaigns/paper-robustness.yaml at ``--duration`` 30 s, the tuning's) on the
-  seeds 101-103, ``--flights`` 1,000 each, one campaign folder per seed and kind
-  (``DIR/heldout/seed-S/KIND``; checked to fly the same perturbed flights: the heldout study); the tables
+* **held out**: ``SPEC`` (default campaigns/paper-robustness-drawn-actuator.yaml, the actuator drawn per flight,
+  at ``--duration`` 30 s, the tuning's) on the seeds 101-103, ``--flights`` 1,000 each, one campaign folder per
+  seed and kind (``DIR/heldout/seed-S/KIND``; checked to fly the same perturbed flights: the heldout study); the tables
   of the heldout study: per kind and the paired comparison against the NNIT2FSMC;
 * **breaking points**: ``run_stack.py stress SPEC --kind D`` for every disturbance D of
   flight_stack/campaign/stress.py and every kind, ``--stress-flights`` flights of ``--stress-duration`` s per try
@@ -49,6 +49,7 @@ from flight_stack.campaign.results import FLIGHTS_FILE
 from flight_stack.campaign.runner import RunOptions, holds_campaign, run_campaign
 from flight_stack.campaign.spec import load_spec
 from flight_stack.campaign.stress import BREAKING_POINTS_FILE, KINDS as DISTURBANCES
+from flight_stack.campaign.tune import OBJECTIVES, REQUIRED_FINISHED_SHARE
 from nnit2fsmc_controller.registry import check_controller
 from nnit2fsmc_controller.factory import DEFAULT_CONTROLLER_FILE, flatten_gains, load_gains, locate_gains
 from nnit2fsmc_controller.search_spaces import search_space, values_in, with_values
@@ -60,7 +61,9 @@ from .common import add_out, names, progress, run_all, study_name
 STUDY = study_name(__name__)
 
 KINDS = ('nnit2fsmc', 'pid', 'se3', 'smc-integral', 'l1-se3', 'indi')
-SPEC = 'campaigns/paper-robustness.yaml'
+#: the world: the example campaign with the actuator drawn per flight (issue 37; the fixed one is --spec
+#: campaigns/paper-robustness.yaml)
+SPEC = 'campaigns/paper-robustness-drawn-actuator.yaml'
 HELDOUT_SEEDS = (101, 102, 103)
 SETTINGS_FILE = 'scoreboard.json'
 #: the header lines ``package`` writes (and replaces when run again): where each kind's tuned point came from
@@ -74,19 +77,42 @@ MARGIN_FLIGHTS = 2 * (2 + 8)
 
 # --- 1. package: each kind's best accepted tuned point onto the packaged gains file ----------------------
 
-def ranked_points(trials_csv: Path, kind: str) -> list[tuple[dict, dict]]:
+def ranked_points(trials_csv: Path, kind: str, pick: str | None = None) -> list[tuple[dict, dict]]:
     """[(point {dimension: value}, its row)] of every complete trial of a ``run_stack.py tune`` trials table,
-    best first (the lowest objective; the earlier trial on a tie, as Optuna's best trial)."""
+    best first, the earlier trial on a tie (as Optuna's best trial). ``pick`` None: by the study's objective;
+    ``median`` or ``p95``: by that statistic under the tuning's rule (tune.penalised: a trial that finished
+    99 % of its flights by the statistic, then the others by their finished share), among the trials flown on
+    every seed, as ``tune`` writes ``gains-KIND-median.yaml`` and ``gains-KIND-p95.yaml``."""
     with trials_csv.open(newline='') as stream:
         rows = [row for row in csv.DictReader(stream) if row['state'] == 'complete']
+    if pick is not None:
+        rows = _flown_on_every_seed(trials_csv, rows, pick)
     if not rows:
         raise ParameterError(f'{trials_csv}: no complete trial')
-    rows.sort(key=lambda row: (float(row['objective_m']), int(row['trial'])))
+
+    def rank(row: dict) -> tuple:
+        if pick is None:
+            return (float(row['objective_m']), int(row['trial']))
+        share = int(row['finished']) / int(row['flights'])
+        if share >= REQUIRED_FINISHED_SHARE:
+            return (0, float(row[f'{pick}_rmse_m']), int(row['trial']))
+        return (1, -share, int(row['trial']))
+    rows.sort(key=rank)
     names = [d.name for d in search_space(kind)]
     missing = [name for name in names if name not in rows[0]]
     if missing:
         raise ParameterError(f'{trials_csv}: no column {missing[0]} ({kind}\'s search space: {", ".join(names)})')
     return [({name: float(row[name]) for name in names}, row) for row in rows]
+
+
+def _flown_on_every_seed(trials_csv: Path, rows: list[dict], pick: str) -> list[dict]:
+    """The ``rows`` flown on every seed that record the statistic ``pick`` (``median``, ``p95``)."""
+    if pick not in OBJECTIVES:
+        raise ParameterError(f'--pick: {pick!r} is not one of {", ".join(OBJECTIVES)}')
+    if rows and f'{pick}_rmse_m' not in rows[0]:
+        raise ParameterError(f'{trials_csv}: no column {pick}_rmse_m (--pick {pick} needs a table that records it)')
+    seeds = max((int(row['seeds_flown'] or 0) for row in rows), default=0)
+    return [row for row in rows if int(row['seeds_flown'] or 0) == seeds and row[f'{pick}_rmse_m'] not in ('', 'nan')]
 
 
 #: what a tuned point must also do before it is packaged: the ``hover`` scenario (a 1 m take-off step,
@@ -167,11 +193,13 @@ def set_in_text(text: str, values: dict[str, float]) -> str:
 
 
 def package(root: Path, kinds, into: Path, trials_to: Path | None,
-            accept: Callable[[str, dict], str | None] = hover_acceptance) -> list[str]:
-    """Apply each kind's best accepted point (``root/tune-KIND/trials-KIND.csv``: the complete trial of the
-    lowest objective for which ``accept(kind, gains)`` says None, :func:`hover_acceptance`) to the gains
-    file ``into`` by its dimension names; checks that the file then holds exactly those gains changed. The
-    report's lines (each says which better trials failed the acceptance, and how)."""
+            accept: Callable[[str, dict], str | None] = hover_acceptance, pick: str | None = None) -> list[str]:
+    """Apply each kind's best accepted point (``root/tune-KIND/trials-KIND.csv``: the first trial of
+    :func:`ranked_points` by ``pick`` for which ``accept(kind, gains)`` says None, :func:`hover_acceptance`) to
+    the gains file ``into`` by its dimension names; checks that the file then holds exactly those gains changed.
+    The report's lines (each says which better trials failed the acceptance, and how)."""
+    column = 'objective_m' if pick is None else f'{pick}_rmse_m'
+    said = 'objective' if pick is None else pick
     base = load_gains(into)
     text = into.read_text()
     expected = base
@@ -179,16 +207,16 @@ def package(root: Path, kinds, into: Path, trials_to: Path | None,
     for kind in kinds:
         trials = root / f'tune-{kind}' / f'trials-{kind}.csv'
         refused = []
-        for point, row in ranked_points(trials, kind):
+        for point, row in ranked_points(trials, kind, pick):
             why = accept(kind, with_values(expected, kind, point))
             if why is None:
                 break
-            refused.append(f'trial {row["trial"]} ({100 * float(row["objective_m"]):.3f} cm): {why}')
+            refused.append(f'trial {row["trial"]} ({100 * float(row[column]):.3f} cm): {why}')
         else:
             raise ParameterError(f'{trials}: no complete trial passes the acceptance ({"; ".join(refused)})')
         expected = with_values(expected, kind, point)
         text = set_in_text(text, {gain: point[d.name] for d in search_space(kind) for gain in d.gains})
-        report.append(f'{kind}: trial {row["trial"]}, objective {100 * float(row["objective_m"]):.3f} cm '
+        report.append(f'{kind}: trial {row["trial"]}, {said} {100 * float(row[column]):.3f} cm '
                       f'({row["finished"]}/{row["flights"]} finished): '
                       + ', '.join(f'{name} = {value:.4g}' for name, value in point.items())
                       + (f' (better trials failing the {ACCEPTANCE_SCENARIO} acceptance: {"; ".join(refused)})'
@@ -571,6 +599,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument('--into', type=Path, default=DEFAULT_CONTROLLER_FILE,
                    help='the gains file to write the points into (default: the packaged one)')
     p.add_argument('--trials-to', type=Path, default=None, help='also copy every trials-KIND.csv into this folder')
+    p.add_argument('--pick', choices=OBJECTIVES, default=None,
+                   help='rank the trials by this statistic under the tuning\'s 99 %% finished rule (default: by '
+                        'each study\'s own objective)')
     p = commands.add_parser('plan', help='measure the cost per flight now and print the run\'s plan')
     _run_options(p)
     p.add_argument('--tune-root', type=Path, default=None,
@@ -589,7 +620,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.command == 'package':
-        for line in package(args.root, names(args.kinds), args.into, args.trials_to):
+        for line in package(args.root, names(args.kinds), args.into, args.trials_to, pick=args.pick):
             print(line)
         progress(STUDY, f'wrote the gains file {args.into}')
         return 0
