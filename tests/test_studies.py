@@ -50,8 +50,12 @@ def test_indi_lag_cells_take_the_true_lag_or_a_factor_and_count_failures_as_the_
     from flight_stack.studies.indi_lag import assumed, cell
     assert assumed('true', 0.0153, 0.045) == 0.045 and assumed('2', 0.0153, 0.045) == pytest.approx(0.0306)
     flights = [{'finished': True, 'rmse_position_m': 0.01}] * 18 + [{'finished': False, 'rmse_position_m': 0.02}] * 2
-    # p50 of eighteen 1 cm and two failures (1 m each) is 1 cm; p95 lies between the 19th and 20th value: 1 m
-    assert cell(flights, 1.0) == '18/20: 1.00 / 100.00'
+    # p50 of eighteen 1 cm and two failures (1 m each) is 1 cm; p95 lies between the 19th and 20th value, both
+    # failures: said as such, not as the 1 m they are counted as
+    assert cell(flights, 1.0) == '18/20: 1.00 / failed'
+    # p95 of 19 finished and one failure interpolates between the 19th (finished) and the 20th: a failure enters it
+    assert cell(flights[:1] * 19 + flights[-1:], 1.0) == '19/20: 1.00 / failed'
+    assert cell(flights[:1] * 20, 1.0) == '20/20: 1.00 / 1.00'
 
 
 @pytest.mark.parametrize('option, value', [('--lags', 'abc'), ('--lags', '-1'), ('--factors', 'twice')])
