@@ -154,12 +154,12 @@ def test_each_kinds_own_campaign_flies_the_same_perturbed_flights(scheduler, tmp
 # --- named gains sets --------------------------------------------------------------------------------------
 
 def test_the_named_gains_sets_are_found_by_name_and_hold_every_gain(tmp_path, monkeypatch):
-    assert set(shipped_gains()) == {'packaged', 'untuned', 'paper-faithful', 'px4-sih', 'second-round'}
+    assert set(shipped_gains()) == {'packaged', 'untuned', 'paper-faithful', 'px4-sih', 'second-round', 'median-tuned'}
     assert locate_gains('packaged') == locate_gains(None) == DEFAULT_CONTROLLER_FILE
     assert locate_gains('untuned.yaml') == shipped_gains()['untuned']
     for name in shipped_gains():
         assert set(flatten_gains(load_gains(name))) == set(gain_names()), name   # complete: nothing falls back
-    with pytest.raises(ParameterError, match='named gains: packaged, paper-faithful, px4-sih, second-round, untuned'):
+    with pytest.raises(ParameterError, match='named gains: packaged, median-tuned, paper-faithful, px4-sih, second-round, untuned'):
         load_gains('nope')
     monkeypatch.chdir(tmp_path)
     (tmp_path / 'untuned').write_text(yaml.safe_dump({'common': {'control_rate': 500.0}}))
