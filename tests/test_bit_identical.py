@@ -2,13 +2,15 @@
 flight world module, the api/cli layering, a studies package), every flight and a small campaign stay bit for bit
 what they were at commit 0ff291a, the last commit before those moves.
 
-:func:`fingerprints` uses only the public API that existed at 0ff291a and still exists (``flight_stack.api.fly``
-and ``run_campaign``, ``nnit2fsmc_controller.factory.CONTROLLERS``, ``nnit2fsmc_controller.trajectory.SCENARIOS``),
-so the same function runs on both trees. It flies every built-in kind on every scenario for its first 4 s (the
+:func:`fingerprints` uses only names that existed at 0ff291a and still exist (``flight_stack.api.fly``, the campaign
+runner's ``run_campaign`` and ``RunOptions``, ``load_spec``, ``nnit2fsmc_controller.factory.CONTROLLERS``,
+``nnit2fsmc_controller.trajectory.SCENARIOS``), so the same function runs on both trees. It flies every built-in kind on every scenario for its first 4 s (the
 steps' first 7 s, its first step included; the waypoints scenario whole: its duration is fixed by its last
-waypoint, make_scenario accepts only its own 20 s) with the default gains, vehicle and disturbances, and runs the
-shipped campaign 'mild-every-perturbation' (every perturbation on) overridden to 6 flights of 3 s by nnit2fsmc, pid
-and indi in one worker. A flight's fingerprint is the sha256 of the raw float64 bytes of its time, state, forces
+waypoint, make_scenario accepts only its own 20 s) with the default vehicle and disturbances and the gains packaged
+at 0ff291a (tests/data/gains_0ff291a.yaml, which both trees load: the test compares the code, not the packaged
+gains, which later tuning changes on purpose), and runs the shipped campaign 'mild-every-perturbation' (every
+perturbation on) overridden to 6 flights of 3 s by nnit2fsmc, pid and indi in one worker with those gains (the
+campaign runner's ``RunOptions.gains_file``, in both trees). A flight's fingerprint is the sha256 of the raw float64 bytes of its time, state, forces
 and controls arrays; the campaign's, the sha256 of its flights.csv without the columns that depend on wall time
 (there are none; WALL_TIME_COLUMNS says how they would be found).
 
@@ -39,6 +41,7 @@ from pathlib import Path
 import pytest
 
 RECORDING = Path(__file__).parent / 'data' / 'bit_identical_0ff291a.json'
+GAINS = Path(__file__).parent / 'data' / 'gains_0ff291a.yaml'    #: what every flight flies, in both trees
 DURATION = 4.0                    #: [s] flown of every scenario (but those below)
 #: 'steps' holds its first setpoint until 5 s (then a 2 s transition): its first 4 s are the hover's, bit for bit
 DURATIONS = {'steps': 7.0}
@@ -80,9 +83,11 @@ def _csv_digest(path: Path) -> str:
 
 def fingerprints(progress=None) -> dict[str, str]:
     """name -> sha256 hex digest: 'fly/KIND/SCENARIO' for every built-in kind on every scenario, and
-    'campaign/mild-every-perturbation/flights.csv'. Only public names that exist at 0ff291a and now."""
+    'campaign/mild-every-perturbation/flights.csv'. Only names that exist at 0ff291a and now."""
     import flight_stack
-    from flight_stack.api import fly, run_campaign
+    from flight_stack.api import fly
+    from flight_stack.campaign.runner import RunOptions, run_campaign
+    from flight_stack.campaign.spec import load_spec
     from nnit2fsmc_controller.factory import CONTROLLERS
     from nnit2fsmc_controller.trajectory import SCENARIOS
 
@@ -90,13 +95,16 @@ def fingerprints(progress=None) -> dict[str, str]:
     for kind in CONTROLLERS:
         for scenario in SCENARIOS:
             duration = None if scenario in FIXED_LENGTH_SCENARIOS else DURATIONS.get(scenario, DURATION)
-            flight = fly(kind, scenario, duration=duration)
+            flight = fly(kind, scenario, duration=duration, gains=GAINS)
             result[f'fly/{kind}/{scenario}'] = _digest(flight.time, flight.state, flight.forces, flight.controls)
             if progress:
                 progress(f'fly/{kind}/{scenario}', result[f'fly/{kind}/{scenario}'])
     spec = Path(flight_stack.__file__).parent / 'campaign' / 'specs' / f'{CAMPAIGN_SPEC}.yaml'
     with tempfile.TemporaryDirectory() as out:
-        run_campaign(spec, Path(out) / 'campaign', **CAMPAIGN)
+        campaign = load_spec(spec).overridden(flights=CAMPAIGN['flights'], duration=CAMPAIGN['duration'],
+                                              controllers=CAMPAIGN['controllers'])
+        run_campaign(campaign, Path(out) / 'campaign',
+                     RunOptions(workers=CAMPAIGN['workers'], progress=False, gains_file=str(GAINS)))
         key = f'campaign/{CAMPAIGN_SPEC}/flights.csv'
         result[key] = _csv_digest(Path(out) / 'campaign' / 'flights.csv')
     if progress:
