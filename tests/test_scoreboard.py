@@ -1,8 +1,10 @@
 """Issue 26's scoreboard (docs/SCOREBOARD.md): its statistics on synthetic data, the pairing of separate
 campaigns, the named gains sets, and the packaging of tuned points into one gains file."""
 import csv
+import json
 import math
 import random
+from dataclasses import replace
 from pathlib import Path
 
 import distributed
@@ -299,3 +301,27 @@ def test_the_generated_section_is_replaced_between_its_markers(tmp_path):
     path.write_text('no markers')
     with pytest.raises(ParameterError, match='generated section'):
         scoreboard.write_section(path, 'x')
+
+
+def test_a_dir_refuses_other_settings_for_the_parts_it_flew_and_keeps_those_of_parts_not_flown_now(tmp_path):
+    """scoreboard.json: a part flown before keeps its settings; another setting of a part flown now is refused
+    only if that part was flown; the common settings (spec, gains, kinds) never change."""
+    first = scoreboard.Settings(stress_flights=20)
+    scoreboard.claim(first, tmp_path, {'heldout'})
+    stored = json.loads((tmp_path / scoreboard.SETTINGS_FILE).read_text())
+    assert stored['flown'] == ['heldout'] and stored['flights'] == 1000
+    more = scoreboard.Settings(stress_flights=100)                 # stress not flown yet: may change
+    scoreboard.claim(more, tmp_path, {'stress'})
+    stored = json.loads((tmp_path / scoreboard.SETTINGS_FILE).read_text())
+    assert stored['flown'] == ['heldout', 'stress'] and stored['stress_flights'] == 100
+    with pytest.raises(ParameterError, match='another stress_flights'):
+        scoreboard.claim(first, tmp_path, {'stress'})
+    with pytest.raises(ParameterError, match='another flights'):
+        scoreboard.claim(replace(more, flights=50), tmp_path, {'heldout', 'stress'})
+    scoreboard.claim(replace(more, flights=50), tmp_path, {'margins'})    # held out not flown now: kept as it was
+    assert json.loads((tmp_path / scoreboard.SETTINGS_FILE).read_text())['flights'] == 1000
+    with pytest.raises(ParameterError, match='another spec'):
+        scoreboard.claim(replace(more, spec='campaigns/paper-robustness.yaml'), tmp_path, {'nominal'})
+    (tmp_path / scoreboard.SETTINGS_FILE).write_text(json.dumps(first.identity()))     # from before: every part
+    with pytest.raises(ParameterError, match='another stress_flights'):
+        scoreboard.claim(more, tmp_path, {'stress'})

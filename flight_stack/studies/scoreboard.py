@@ -258,7 +258,7 @@ class Settings:
     flights: int = 1000
     duration: float = 30.0
     disturbances: tuple[str, ...] = tuple(DISTURBANCES)
-    stress_flights: int = 20
+    stress_flights: int = 100
     stress_duration: float = 15.0
     nominal_duration: float = 60.0
     margin_duration: float = 30.0
@@ -646,17 +646,40 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+#: settings every part depends on: a DIR's are never changed
+COMMON_SETTINGS = ('spec', 'gains', 'gains_digest', 'kinds')
+#: the settings of each part's flights: a run into a DIR refuses to fly a part whose stored settings differ, and
+#: leaves a part it does not fly as it is (so more flights per stress try may follow a held-out part flown before)
+PART_SETTINGS = {'heldout': ('seeds', 'flights', 'duration'),
+                 'stress': ('disturbances', 'stress_flights', 'stress_duration'),
+                 'nominal': ('nominal_duration',),
+                 'margins': ('margin_duration',)}
+
+
+def claim(settings: Settings, out: Path, parts: set[str]) -> None:
+    """Record in ``out/scoreboard.json`` that ``parts`` are flown with ``settings``; ParameterError naming the
+    settings if ``out`` holds a run with other common settings or gains, or with other settings of a part in
+    ``parts`` that it flew (the file's ``flown``; a file without it, from before, flew every part)."""
+    identity = settings.identity()
+    path = out / SETTINGS_FILE
+    stored = json.loads(path.read_text()) if path.exists() else {}
+    flown = set(stored.get('flown', PARTS)) if stored else set()
+    keys = list(COMMON_SETTINGS) + [key for part in PARTS if part in parts & flown for key in PART_SETTINGS[part]]
+    differing = [key for key in keys if stored and stored.get(key) != identity[key]]
+    if differing:
+        raise ParameterError(f'--out: {out} holds a scoreboard flown with another {", ".join(differing)} '
+                             f'({path}); use another --out')
+    kept = {key: stored[key] for part in flown - parts for key in PART_SETTINGS[part]}
+    path.write_text(json.dumps({**identity, **kept, 'flown': [p for p in PARTS if p in flown | parts]}, indent=1))
+
+
 def fly_all(settings: Settings, out: Path, skip: set[str]) -> None:
-    """Fly every part not in ``skip`` that ``out`` lacks (refused if ``out`` holds a run of other settings)."""
+    """Fly every part not in ``skip`` that ``out`` lacks (refused if ``out`` holds a run of other settings:
+    :func:`claim`)."""
     if skip - set(PARTS):
         raise ParameterError(f'--skip: unknown {", ".join(sorted(skip - set(PARTS)))} (parts: {", ".join(PARTS)})')
     out.mkdir(parents=True, exist_ok=True)
-    identity = settings.identity()
-    stored_path = out / SETTINGS_FILE
-    if stored_path.exists() and json.loads(stored_path.read_text()) != identity:
-        raise ParameterError(f'--out: {out} holds a scoreboard of other settings or gains '
-                             f'({stored_path}); use another --out')
-    stored_path.write_text(json.dumps(identity, indent=1))
+    claim(settings, out, set(PARTS) - skip)
     if 'heldout' not in skip:
         fly_heldout(settings, out)
     if 'stress' not in skip:
