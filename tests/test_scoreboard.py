@@ -325,3 +325,20 @@ def test_a_dir_refuses_other_settings_for_the_parts_it_flew_and_keeps_those_of_p
     (tmp_path / scoreboard.SETTINGS_FILE).write_text(json.dumps(first.identity()))     # from before: every part
     with pytest.raises(ParameterError, match='another stress_flights'):
         scoreboard.claim(more, tmp_path, {'stress'})
+
+
+def test_failures_by_the_drawn_actuator_count_each_third_of_each_drawn_range_and_their_top_corner():
+    """Two controllers on nine flights drawing a motor time constant (15-45 ms) and a delay (0-8 ms): the failed
+    flights of each third, and of the top third of both; one actuator for every flight gives no table."""
+    lags, delays = (0.015, 0.030, 0.045), (0.0, 0.004, 0.008)
+    flights = [(lag, delay) for lag in lags for delay in delays]
+    rows = [{'controller': kind, 'flight': k, 'motor_time_constant_s': lag, 'delay_s': delay,
+             'finished': not (kind == 'slow' and lag == 0.045 and delay > 0.0)}
+            for kind in ('fast', 'slow') for k, (lag, delay) in enumerate(flights)]
+    lines = heldout.actuator_lines({1: rows})
+    assert lines[0] == ('| controller | motor time constant 15-15 ms | motor time constant 30-30 ms | '
+                        'motor time constant 45-45 ms | delay 0-0 ms | delay 4-4 ms | delay 8-8 ms | '
+                        'top third of motor time constant and delay |')
+    assert lines[2] == '| fast | 0/3 | 0/3 | 0/3 | 0/3 | 0/3 | 0/3 | 0/1 |'
+    assert lines[3] == '| slow | 0/3 | 0/3 | 2/3 | 0/3 | 1/3 | 1/3 | 1/1 |'
+    assert heldout.actuator_lines({1: [dict(r, motor_time_constant_s=0.03, delay_s=0.004) for r in rows]}) == []

@@ -20,7 +20,8 @@ percentile falls on failures) with distribution-free order-statistic intervals, 
 U1 [N/s] / of the moments [N m/s] over the finished flights. Paired against the reference, flight by
 flight: the share each one has the lower RMSE (a finished flight beats a failed one; both failed is a tie),
 the median paired difference RMSE(controller) - RMSE(reference) [cm] with its sign-test interval, and the
-two-sided sign test's p-value. A folder still being flown gives the rows flown so far.
+two-sided sign test's p-value. Where the flights drew their actuator (a motor time constant, a delay), the failed
+flights by third of each drawn range (:func:`actuator_lines`). A folder still being flown gives the rows flown so far.
 """
 from __future__ import annotations
 
@@ -195,6 +196,41 @@ def paired_lines(records: list[dict]) -> list[str]:
     return lines
 
 
+#: the actuator columns a world may draw per flight: column, name, unit scale, unit
+ACTUATOR_COLUMNS = (('motor_time_constant_s', 'motor time constant', 1000.0, 'ms'), ('delay_s', 'delay', 1000.0, 'ms'))
+
+
+def actuator_lines(by_seed: dict[int, list[dict]]) -> list[str]:
+    """Where the flights failed, by the actuator each drew (all seeds pooled): per controller, the failed flights
+    of each third of the drawn range of every actuator column that varies, and of the flights in the top third
+    of all of them (the slowest rotors with the longest delays). No lines if no column varies (one actuator)."""
+    rows = [row for seed in sorted(by_seed) for row in by_seed[seed]]
+    drawn = [c for c in ACTUATOR_COLUMNS if len({row.get(c[0]) for row in rows}) > 1 and all(c[0] in r for r in rows)]
+    if not drawn:
+        return []
+
+    def third(column: str, value: float) -> int:
+        low, high = min(r[column] for r in rows), max(r[column] for r in rows)
+        return min(2, int(3 * (value - low) / (high - low)))
+    bins = {}       # (column, third) -> its label from the values drawn in it
+    for column, _, scale, unit in drawn:
+        for index in range(3):
+            values = [r[column] * scale for r in rows if third(column, r[column]) == index]
+            bins[column, index] = f'{min(values):.3g}-{max(values):.3g} {unit}' if values else 'none'
+    header = ['controller'] + [f'{name} {bins[column, i]}' for column, name, _, _ in drawn for i in range(3)]
+    header.append('top third of ' + (' and '.join(name for _, name, _, _ in drawn)))
+    lines = ['| ' + ' | '.join(header) + ' |', '|---|' + '---:|' * (len(header) - 1)]
+
+    def failed(mine: list[dict]) -> str:
+        return f'{sum(not r["finished"] for r in mine)}/{len(mine)}' if mine else '-'
+    for controller in controllers_of(by_seed):
+        mine = [r for r in rows if r['controller'] == controller]
+        cells = [failed([r for r in mine if third(column, r[column]) == i]) for column, *_ in drawn for i in range(3)]
+        cells.append(failed([r for r in mine if all(third(column, r[column]) == 2 for column, *_ in drawn)]))
+        lines.append(f'| {controller} | ' + ' | '.join(cells) + ' |')
+    return lines
+
+
 def write_csv(records: list[dict], path: Path) -> Path:
     """The records as CSV, an interval as two columns (``_low``, ``_high``)."""
     flat = []
@@ -239,5 +275,8 @@ def run(args: argparse.Namespace) -> int:
     pairs = paired_records(by_seed, args.reference)
     if pairs:
         lines += [''] + paired_lines(pairs)
+    actuator = actuator_lines(by_seed)
+    if actuator:
+        lines += ['', 'Failed flights by the actuator each drew (failed/flights, all seeds):', ''] + actuator
     write_table(STUDY, args.out, '\n'.join(lines))
     return 0

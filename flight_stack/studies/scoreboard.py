@@ -423,6 +423,11 @@ def tables(out: Path, settings: Settings) -> str:
                   '',
                   'A finished flight beats a failed one; two failed flights tie. The median paired difference has '
                   'the sign test\'s order-statistic interval.', '', *heldout.paired_lines(pairs), '']
+        actuator = heldout.actuator_lines(by_seed)
+        if actuator:
+            parts += ['### Where the held-out flights failed, by the actuator each drew', '',
+                      'Failed flights / flights, all seeds, by third of the drawn range (the top third of both: '
+                      'the slowest rotors with the longest delays).', '', *actuator, '']
     parts += [f'### Breaking points: the intensity where fewer than 90 % of {s.stress_flights} flights of '
               f'{s.stress_duration:g} s finish under 10 cm (`run_stack.py stress`)', '',
               *breaking_lines(out / 'stress' / BREAKING_POINTS_FILE, s.kinds, s.disturbances), '']
