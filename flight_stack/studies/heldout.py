@@ -209,8 +209,10 @@ def actuator_lines(by_seed: dict[int, list[dict]]) -> list[str]:
     if not drawn:
         return []
 
+    ranges = {column: (min(r[column] for r in rows), max(r[column] for r in rows)) for column, *_ in drawn}
+
     def third(column: str, value: float) -> int:
-        low, high = min(r[column] for r in rows), max(r[column] for r in rows)
+        low, high = ranges[column]
         return min(2, int(3 * (value - low) / (high - low)))
     bins = {}       # (column, third) -> its label from the values drawn in it
     for column, _, scale, unit in drawn:
