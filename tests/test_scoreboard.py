@@ -342,3 +342,7 @@ def test_failures_by_the_drawn_actuator_count_each_third_of_each_drawn_range_and
     assert lines[2] == '| fast | 0/3 | 0/3 | 0/3 | 0/3 | 0/3 | 0/3 | 0/1 |'
     assert lines[3] == '| slow | 0/3 | 0/3 | 2/3 | 0/3 | 1/3 | 1/3 | 1/1 |'
     assert heldout.actuator_lines({1: [dict(r, motor_time_constant_s=0.03, delay_s=0.004) for r in rows]}) == []
+
+
+def test_a_p_value_below_what_a_float_holds_is_said_as_such_not_as_zero():
+    assert heldout.p_value(0.0) == '< 1e-300' and heldout.p_value(1.2345e-155) == '1.2e-155'

@@ -182,6 +182,11 @@ def kind_lines(records: list[dict]) -> list[str]:
     return lines
 
 
+def p_value(p: float) -> str:
+    """A p-value's cell: two significant digits, or '< 1e-300' where it is below what a float holds (0)."""
+    return '< 1e-300' if p == 0.0 else f'{p:.2g}'
+
+
 def paired_lines(records: list[dict]) -> list[str]:
     reference = records[0]['reference'] if records else REFERENCE
     lines = [f'| controller | seed | pairs | it beats {reference} | {reference} beats it | ties | '
@@ -192,7 +197,7 @@ def paired_lines(records: list[dict]) -> list[str]:
         lines.append(f'| {r["controller"]} | {r["seed"]} | {r["pairs"]} | {100 * r["controller_better_share"]:.1f} % | '
                      f'{100 * r["reference_better_share"]:.1f} % | {r["ties"]} | '
                      f'{cm(r["median_difference_cm"], True)} ({cm(low, True)} - {cm(high, True)}) | '
-                     f'{r["sign_test_p"]:.2g} |')
+                     f'{p_value(r["sign_test_p"])} |')
     return lines
 
 
