@@ -81,7 +81,9 @@ def test_one_vehicle_steps_as_floats_and_a_wrong_batch_is_refused():
 
 @needs_torch
 def test_a_campaign_flies_the_same_flights_on_both_rotorpy_plants():
-    """Two flights of the example campaign's perturbations (wind, noise, delay, motor lag, mass), 2 s of hover."""
+    """Two flights of the example campaign's perturbations (wind, noise, delay, motor lag, mass), 2 s of hover: the
+    same outcome on both plants, finished or failed alike (the packaged NNIT2FSMC of issue 37's third round loses the
+    second one, 1.5 s in, on this light vehicle), with the same RMSE."""
     from flight_stack.campaign.batch import BatchJob, fly_batch
     from flight_stack.campaign.spec import parse_spec
     raw = {'scenario': 'hover', 'duration': 2.0, 'settle_time': 1.0, 'controllers': ['nnit2fsmc'], 'flights': 2,
@@ -90,8 +92,9 @@ def test_a_campaign_flies_the_same_flights_on_both_rotorpy_plants():
     rows = {plant: fly_batch(BatchJob(parse_spec({**raw, 'plant': plant}), 'nnit2fsmc', (0, 1), None, None))
             for plant in ('rotorpy', 'rotorpy-batched')}
     for single, batched in zip(rows['rotorpy'], rows['rotorpy-batched']):
-        assert single['finished'] and batched['finished']
+        assert (batched['finished'], batched['failure']) == (single['finished'], single['failure'])
         assert batched['rmse_position_m'] == pytest.approx(single['rmse_position_m'], rel=1e-4)
+    assert any(row['finished'] for row in rows['rotorpy'])
     assert rows['rotorpy'][0]['rmse_position_m'] != rows['rotorpy'][1]['rmse_position_m']
 
 
