@@ -346,3 +346,14 @@ def test_failures_by_the_drawn_actuator_count_each_third_of_each_drawn_range_and
 
 def test_a_p_value_below_what_a_float_holds_is_said_as_such_not_as_zero():
     assert heldout.p_value(0.0) == '< 1e-300' and heldout.p_value(1.2345e-155) == '1.2e-155'
+
+
+def test_a_breaking_point_whose_intervals_straddle_90_percent_is_shown_with_where_it_surely_lies(tmp_path):
+    path = tmp_path / 'breaking_points.csv'
+    header = 'kind,controller,status,holds_at,fails_at,range_low,range_high\n'
+    path.write_text(header + 'wind,pid,range,7.25,7.5,5.0,10.0\nwind,se3,range,10.25,10.5,nan,12.5\n'
+                    'wind,indi,found,9,9.25,9,9.25\n')
+    lines = scoreboard.breaking_lines(path, ('pid', 'se3', 'indi', 'l1-se3'), ('wind',))
+    assert lines[2] == '| pid | 7.5? (holds at 7.25; surely between 5 and 10) |'
+    assert lines[3] == '| se3 | 10.5? (holds at 10.25; surely at or below 12.5) |'
+    assert lines[4] == '| indi | 9.25 (holds at 9) |' and lines[5] == '| l1-se3 | not flown |'

@@ -350,7 +350,8 @@ def _margin_task(task) -> dict:
 
 def breaking_lines(path: Path, kinds, disturbances) -> list[str]:
     """Kind x disturbance: the breaking point (found: 'x (holds at y)'; a range, the 95 % intervals at x and y
-    straddling 90 %: 'x? (holds at y; ...)'; none up to the range's end: '> x';
+    straddling 90 %: 'x? (holds at y; surely between a and b)', where the tries' intervals clear 90 %, see
+    :func:`sure_range`; none up to the range's end: '> x';
     already below 90 % at the low end: '<= x'; no search yet: 'not flown'), from stress's breaking_points.csv."""
     if not path.exists():
         return ['(no breaking point flown yet)']
@@ -368,14 +369,26 @@ def breaking_lines(path: Path, kinds, disturbances) -> list[str]:
             elif row['status'] == 'found':
                 cells.append(f'{float(row["fails_at"]):g} (holds at {float(row["holds_at"]):g})')
             elif row['status'] == 'range':
-                cells.append(f'{float(row["fails_at"]):g}? (holds at {float(row["holds_at"]):g}; the intervals '
-                             'straddle 90 %)')
+                cells.append(f'{float(row["fails_at"]):g}? (holds at {float(row["holds_at"]):g}; surely '
+                             f'{sure_range(float(row["range_low"]), float(row["range_high"]))})')
             elif row['status'] == 'above_range':
                 cells.append(f'> {float(row["holds_at"]):g}')
             else:
                 cells.append(f'<= {float(row["fails_at"]):g}')
         lines.append(f'| {kind} | ' + ' | '.join(cells) + ' |')
     return lines
+
+
+def sure_range(low: float, high: float) -> str:
+    """Where a breaking point surely lies (stress's ``range_low``, ``range_high``: the highest try whose whole 95 %
+    interval holds 90 %, the lowest whose whole interval is below it; nan where no try is that sure)."""
+    if math.isnan(low) and math.isnan(high):
+        return 'nowhere the tries tell'
+    if math.isnan(low):
+        return f'at or below {high:g}'
+    if math.isnan(high):
+        return f'above {low:g}'
+    return f'between {low:g} and {high:g}'
 
 
 def margin_records(path: Path, kinds) -> list[dict]:
